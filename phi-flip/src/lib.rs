@@ -1,0 +1,1 @@
+//! The FLIP liquid simulator (thesis algorithm 1), written once against `phi_core::backend::Backend`.

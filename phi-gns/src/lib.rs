@@ -1,0 +1,1 @@
+//! Graph Network-based Simulators trained on FLIP datasets.
