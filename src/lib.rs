@@ -1,1 +1,16 @@
+//! phi: differentiable liquid simulation and learned simulators.
+//!
+//! This facade re-exports the crates of the workspace:
+//! - [`phi_core`]: the [`Backend`] trait and its implementations, [`Tensor`], fields and solvers;
+//! - [`phi_geom`]: geometries and obstacles;
+//! - [`phi_flip`]: the FLIP liquid simulator;
+//! - [`phi_gns`]: Graph Network-based Simulators.
 
+pub mod backends;
+pub mod demo;
+
+pub use phi_core;
+pub use phi_core::{AutodiffBackend, Backend, IntTensor, Tensor, TensorError};
+pub use phi_flip;
+pub use phi_geom;
+pub use phi_gns;

@@ -1,0 +1,4 @@
+//! Integration tests of phi: one binary, modules by topic.
+
+#[cfg(feature = "ndarray")]
+mod conformance;
