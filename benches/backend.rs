@@ -17,22 +17,30 @@ fn bench_backend<B: Backend>(c: &mut Criterion) {
 
     let x = Tensor::<B>::random_uniform(&[8192, 128], -1.0, 1.0, 1, &device);
     let w = Tensor::<B>::random_uniform(&[128, 128], -1.0, 1.0, 2, &device);
-    c.bench_with_input(BenchmarkId::new("matmul 8192x128x128", name), &(), |b, _| {
-        b.iter(|| force(&x.matmul(&w).unwrap()))
-    });
+    c.bench_with_input(
+        BenchmarkId::new("matmul 8192x128x128", name),
+        &(),
+        |b, _| b.iter(|| force(&x.matmul(&w).unwrap())),
+    );
 
     let table = Tensor::<B>::random_uniform(&[TABLE, WIDTH], -1.0, 1.0, 3, &device);
-    let indices: Vec<i64> = (0..ROWS as i64).map(|i| (i * 7919) % TABLE as i64).collect();
+    let indices: Vec<i64> = (0..ROWS as i64)
+        .map(|i| (i * 7919) % TABLE as i64)
+        .collect();
     let indices = IntTensor::<B>::from_vec(indices, &[ROWS], &device).unwrap();
-    c.bench_with_input(BenchmarkId::new("gather 100k rows of 128", name), &(), |b, _| {
-        b.iter(|| force(&table.gather_rows(&indices).unwrap()))
-    });
+    c.bench_with_input(
+        BenchmarkId::new("gather 100k rows of 128", name),
+        &(),
+        |b, _| b.iter(|| force(&table.gather_rows(&indices).unwrap())),
+    );
 
     let values = Tensor::<B>::random_uniform(&[ROWS, WIDTH], -1.0, 1.0, 4, &device);
     let zeros = Tensor::<B>::zeros(&[TABLE, WIDTH], &device);
-    c.bench_with_input(BenchmarkId::new("scatter-add 100k rows of 128 into 10k", name), &(), |b, _| {
-        b.iter(|| force(&zeros.scatter_add_rows(&indices, &values).unwrap()))
-    });
+    c.bench_with_input(
+        BenchmarkId::new("scatter-add 100k rows of 128 into 10k", name),
+        &(),
+        |b, _| b.iter(|| force(&zeros.scatter_add_rows(&indices, &values).unwrap())),
+    );
 }
 
 /// Makes sure lazy or asynchronous backends finish the work: reads one element back.

@@ -89,7 +89,7 @@ impl std::str::FromStr for BackendKind {
 
 /// Runs `$body` with the type alias `$B` bound to the backend `$kind` names.
 ///
-/// ```ignore
+/// ```text
 /// with_backend!(kind, B => run::<B>(&args))
 /// ```
 #[macro_export]

@@ -7,7 +7,11 @@ use phi::demo::{self, DemoReport};
 use phi::{with_autodiff_backend, with_backend};
 
 #[derive(Parser)]
-#[command(name = "phi", version, about = "Differentiable liquid simulation and learned simulators")]
+#[command(
+    name = "phi",
+    version,
+    about = "Differentiable liquid simulation and learned simulators"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -35,12 +39,20 @@ fn main() -> Result<()> {
     match Cli::parse().command {
         Command::Backends => {
             for kind in BackendKind::available() {
-                let autodiff = if kind.has_autodiff() { "autodiff" } else { "forward only" };
+                let autodiff = if kind.has_autodiff() {
+                    "autodiff"
+                } else {
+                    "forward only"
+                };
                 println!("{kind:<10} {autodiff}");
             }
             Ok(())
         }
-        Command::Demo { backend } => run_demo(if backend.is_empty() { BackendKind::available() } else { backend }),
+        Command::Demo { backend } => run_demo(if backend.is_empty() {
+            BackendKind::available()
+        } else {
+            backend
+        }),
     }
 }
 
@@ -69,7 +81,11 @@ fn run_demo(kinds: Vec<BackendKind>) -> Result<()> {
         disagreements += usize::from(!agrees);
         let total: f32 = report.cell_counts.iter().sum();
         if total != demo::PARTICLES as f32 {
-            bail!("{}: binned {total} particles instead of {}", report.backend, demo::PARTICLES);
+            bail!(
+                "{}: binned {total} particles instead of {}",
+                report.backend,
+                demo::PARTICLES
+            );
         }
         let (found, exact, iterations, seconds) = match &report.ballistics {
             Some(b) => (
@@ -78,7 +94,12 @@ fn run_demo(kinds: Vec<BackendKind>) -> Result<()> {
                 b.iterations.to_string(),
                 format!("{:.1} ms", b.seconds * 1e3),
             ),
-            None => ("(no autodiff)".into(), String::new(), String::new(), String::new()),
+            None => (
+                "(no autodiff)".into(),
+                String::new(),
+                String::new(),
+                String::new(),
+            ),
         };
         println!(
             "{:<10} {:>9.1} ms {:>10} {found:>24} {exact:>24} {iterations:>6} {seconds:>10}",
@@ -88,7 +109,10 @@ fn run_demo(kinds: Vec<BackendKind>) -> Result<()> {
         );
     }
     if disagreements > 0 {
-        bail!("{disagreements} backend(s) binned particles differently from {}", reference.backend);
+        bail!(
+            "{disagreements} backend(s) binned particles differently from {}",
+            reference.backend
+        );
     }
     println!("\nAll {} backends agree on every cell.", reports.len());
     Ok(())

@@ -44,7 +44,11 @@ impl Case {
     pub fn all() -> Vec<Case> {
         let mut cases: Vec<Case> = UnaryOp::ALL.iter().map(|&op| Case::Unary(op)).collect();
         cases.extend(BinaryOp::ALL.iter().map(|&op| Case::Binary(op)));
-        cases.extend(BinaryOp::ALL.iter().map(|&op| Case::BinaryScalar(op, scalar_operand(op))));
+        cases.extend(
+            BinaryOp::ALL
+                .iter()
+                .map(|&op| Case::BinaryScalar(op, scalar_operand(op))),
+        );
         cases.extend([Case::Clamp, Case::Where]);
         cases.extend(ReduceOp::ALL.iter().map(|&op| Case::Reduce(op)));
         for axis in 0..3 {
@@ -82,22 +86,43 @@ impl Case {
             }
             Case::BinaryScalar(op, _) => vec![(vec![2, 3], binary_inputs(op, 6, 1).0)],
             // On a 0.13 grid offset so that no value is within 0.03 of the bounds ±0.5.
-            Case::Clamp => vec![(vec![3, 3], (0..9).map(|i| -0.98 + 0.23 * i as f32).collect())],
-            Case::Where => vec![(vec![2, 3], values(6, -1.0, 1.0, 11)), (vec![3], values(3, -1.0, 1.0, 12))],
+            Case::Clamp => vec![(
+                vec![3, 3],
+                (0..9).map(|i| -0.98 + 0.23 * i as f32).collect(),
+            )],
+            Case::Where => vec![
+                (vec![2, 3], values(6, -1.0, 1.0, 11)),
+                (vec![3], values(3, -1.0, 1.0, 12)),
+            ],
             Case::Reduce(_) | Case::ReduceAxis(..) => vec![(vec![2, 3, 4], distinct(24))],
-            Case::Matmul => vec![(vec![2, 3, 4], values(24, -1.0, 1.0, 21)), (vec![2, 4, 5], values(40, -1.0, 1.0, 22))],
+            Case::Matmul => vec![
+                (vec![2, 3, 4], values(24, -1.0, 1.0, 21)),
+                (vec![2, 4, 5], values(40, -1.0, 1.0, 22)),
+            ],
             Case::MatmulBroadcast => {
-                vec![(vec![2, 3, 4], values(24, -1.0, 1.0, 23)), (vec![4, 5], values(20, -1.0, 1.0, 24))]
+                vec![
+                    (vec![2, 3, 4], values(24, -1.0, 1.0, 23)),
+                    (vec![4, 5], values(20, -1.0, 1.0, 24)),
+                ]
             }
             Case::Reshape | Case::Permute | Case::Slice | Case::Pad(_) => {
                 vec![(vec![2, 3, 4], values(24, -1.0, 1.0, 31))]
             }
-            Case::Concat => vec![(vec![2, 3], values(6, -1.0, 1.0, 32)), (vec![2, 2], values(4, -1.0, 1.0, 33))],
-            Case::Stack => vec![(vec![2, 3], values(6, -1.0, 1.0, 34)), (vec![2, 3], values(6, -1.0, 1.0, 35))],
+            Case::Concat => vec![
+                (vec![2, 3], values(6, -1.0, 1.0, 32)),
+                (vec![2, 2], values(4, -1.0, 1.0, 33)),
+            ],
+            Case::Stack => vec![
+                (vec![2, 3], values(6, -1.0, 1.0, 34)),
+                (vec![2, 3], values(6, -1.0, 1.0, 35)),
+            ],
             Case::BroadcastTo => vec![(vec![3, 1], values(3, -1.0, 1.0, 36))],
             Case::GatherRows | Case::GatherNd => vec![(vec![4, 3], values(12, -1.0, 1.0, 41))],
             Case::ScatterAddRows | Case::ScatterAddNd => {
-                vec![(vec![4, 3], values(12, -1.0, 1.0, 42)), (vec![5, 3], values(15, -1.0, 1.0, 43))]
+                vec![
+                    (vec![4, 3], values(12, -1.0, 1.0, 42)),
+                    (vec![5, 3], values(15, -1.0, 1.0, 43)),
+                ]
             }
             Case::ToDevice => vec![(vec![4], values(4, -1.0, 1.0, 44))],
         }
@@ -106,7 +131,9 @@ impl Case {
     /// The operation applied to `inputs` (shaped as [`Case::inputs`] says).
     pub fn apply<B: Backend>(&self, inputs: &[Tensor<B>]) -> Tensor<B> {
         let device = inputs[0].device();
-        let ints = |values: Vec<i64>, shape: &[usize]| IntTensor::<B>::from_vec(values, shape, &device).unwrap();
+        let ints = |values: Vec<i64>, shape: &[usize]| {
+            IntTensor::<B>::from_vec(values, shape, &device).unwrap()
+        };
         let x = &inputs[0];
         match *self {
             Case::Unary(op) => x.unary(op),
@@ -114,7 +141,8 @@ impl Case {
             Case::BinaryScalar(op, scalar) => x.binary_scalar(op, scalar),
             Case::Clamp => x.clamp(-0.5, 0.5),
             Case::Where => {
-                let mask = Tensor::from_vec(vec![1.0, 0.0, 1.0, 0.0, 0.0, 1.0], &[2, 3], &device).unwrap();
+                let mask =
+                    Tensor::from_vec(vec![1.0, 0.0, 1.0, 0.0, 0.0, 1.0], &[2, 3], &device).unwrap();
                 Tensor::select(&mask, x, &inputs[1]).unwrap()
             }
             Case::Reduce(op) => x.reduce(op).unwrap(),
@@ -128,12 +156,20 @@ impl Case {
             Case::BroadcastTo => x.broadcast_to(&[2, 3, 4]).unwrap(),
             Case::Pad(mode) => x.pad(&[(1, 0), (0, 2), (2, 1)], mode).unwrap(),
             Case::GatherRows => x.gather_rows(&ints(vec![3, 0, 3, 1, 3], &[5])).unwrap(),
-            Case::ScatterAddRows => x.scatter_add_rows(&ints(vec![2, 0, 2, 3, 2], &[5]), &inputs[1]).unwrap(),
-            Case::GatherNd => x.gather_nd(&ints(vec![3, 2, 0, 0, 3, 2, 1, 1], &[4, 2])).unwrap(),
+            Case::ScatterAddRows => x
+                .scatter_add_rows(&ints(vec![2, 0, 2, 3, 2], &[5]), &inputs[1])
+                .unwrap(),
+            Case::GatherNd => x
+                .gather_nd(&ints(vec![3, 2, 0, 0, 3, 2, 1, 1], &[4, 2]))
+                .unwrap(),
             Case::ScatterAddNd => {
                 let flat_values = inputs[1].reshape(&[15]).unwrap();
-                let indices = vec![0, 1, 3, 2, 0, 1, 1, 0, 2, 2, 3, 2, 0, 1, 1, 1, 2, 0, 3, 0, 0, 0, 1, 2, 3, 1, 2, 2, 0, 2];
-                x.scatter_add_nd(&ints(indices, &[15, 2]), &flat_values).unwrap()
+                let indices = vec![
+                    0, 1, 3, 2, 0, 1, 1, 0, 2, 2, 3, 2, 0, 1, 1, 1, 2, 0, 3, 0, 0, 0, 1, 2, 3, 1,
+                    2, 2, 0, 2,
+                ];
+                x.scatter_add_nd(&ints(indices, &[15, 2]), &flat_values)
+                    .unwrap()
             }
             Case::ToDevice => x.to_device(&B::default_device()),
         }

@@ -35,10 +35,15 @@ fn weighted_loss<B: AutodiffBackend>(out: &Tensor<B>) -> Tensor<B> {
 
 /// The gradients of the weighted loss of `case` with respect to each input, by backpropagation.
 pub fn case_gradients<B: AutodiffBackend>(case: Case) -> Vec<Tensor<B>> {
-    let leaves: Vec<Tensor<B>> = case.inputs().iter().map(|(s, v)| tensor::<B>(s, v).require_grad()).collect();
+    let leaves: Vec<Tensor<B>> = case
+        .inputs()
+        .iter()
+        .map(|(s, v)| tensor::<B>(s, v).require_grad())
+        .collect();
     let loss = weighted_loss(&case.apply(&leaves));
     let wrt: Vec<&Tensor<B>> = leaves.iter().collect();
-    loss.gradients(&wrt).expect("the loss is a scalar of tracked inputs")
+    loss.gradients(&wrt)
+        .expect("the loss is a scalar of tracked inputs")
 }
 
 /// Checks backpropagated gradients of `case` against central differences.
@@ -59,7 +64,15 @@ fn check_case<B: AutodiffBackend>(case: Case) {
             numeric.push((loss_at(&plus) - loss_at(&minus)) / (2.0 * STEP));
         }
         let g = &gradients[k];
-        assert_values(&format!("{case:?} ∂/∂input{k}"), &g.shape(), &g.to_vec(), shape, &numeric, 1e-2, 2e-3);
+        assert_values(
+            &format!("{case:?} ∂/∂input{k}"),
+            &g.shape(),
+            &g.to_vec(),
+            shape,
+            &numeric,
+            1e-2,
+            2e-3,
+        );
         assert!(!g.is_tracked(), "{case:?}: gradients come back untracked");
     }
 }
@@ -105,7 +118,12 @@ fn shape_gradients<B: AutodiffBackend>() {
 }
 
 fn gather_scatter_gradients<B: AutodiffBackend>() {
-    check_cases::<B>(|c| matches!(c, Case::GatherRows | Case::ScatterAddRows | Case::GatherNd | Case::ScatterAddNd));
+    check_cases::<B>(|c| {
+        matches!(
+            c,
+            Case::GatherRows | Case::ScatterAddRows | Case::GatherNd | Case::ScatterAddNd
+        )
+    });
 }
 
 /// A small network layer, `mean(tanh(x W + b)²)`, whose gradients are known in closed form.
@@ -129,12 +147,36 @@ fn composite_gradient<B: AutodiffBackend>() {
             }
         }
     }
-    assert_values("∂/∂W", &grads[0].shape(), &grads[0].to_vec(), &[3, 2], &dw, 1e-4, 1e-6);
-    assert_values("∂/∂b", &grads[1].shape(), &grads[1].to_vec(), &[2], &db, 1e-4, 1e-6);
+    assert_values(
+        "∂/∂W",
+        &grads[0].shape(),
+        &grads[0].to_vec(),
+        &[3, 2],
+        &dw,
+        1e-4,
+        1e-6,
+    );
+    assert_values(
+        "∂/∂b",
+        &grads[1].shape(),
+        &grads[1].to_vec(),
+        &[2],
+        &db,
+        1e-4,
+        1e-6,
+    );
     // d/dx Σ x² = 2x exactly.
     let x = tensor::<B>(&[3], &[1.0, -2.0, 0.5]).require_grad();
     let g = x.square().sum().gradients(&[&x]).unwrap();
-    assert_values("∂Σx²/∂x", &g[0].shape(), &g[0].to_vec(), &[3], &[2.0, -4.0, 1.0], 0.0, 0.0);
+    assert_values(
+        "∂Σx²/∂x",
+        &g[0].shape(),
+        &g[0].to_vec(),
+        &[3],
+        &[2.0, -4.0, 1.0],
+        0.0,
+        0.0,
+    );
 }
 
 fn detached_and_unused_inputs<B: AutodiffBackend>() {
@@ -145,23 +187,79 @@ fn detached_and_unused_inputs<B: AutodiffBackend>() {
     // Gradient through the first factor only: the detached copy is a constant.
     let loss = (&x * &x.detach()).sum();
     let g = loss.gradients(&[&x, &unused]).unwrap();
-    assert_values("through x only", &g[0].shape(), &g[0].to_vec(), &[2], &[1.0, 2.0], 0.0, 0.0);
-    assert_values("unused input", &g[1].shape(), &g[1].to_vec(), &[3], &[0.0; 3], 0.0, 0.0);
+    assert_values(
+        "through x only",
+        &g[0].shape(),
+        &g[0].to_vec(),
+        &[2],
+        &[1.0, 2.0],
+        0.0,
+        0.0,
+    );
+    assert_values(
+        "unused input",
+        &g[1].shape(),
+        &g[1].to_vec(),
+        &[3],
+        &[0.0; 3],
+        0.0,
+        0.0,
+    );
     // Comparisons are constants too.
     let masked = (&x * &x.compare_scalar(phi_core::backend::CompareOp::Greater, 1.5)).sum();
     let g = masked.gradients(&[&x]).unwrap();
-    assert_values("mask", &g[0].shape(), &g[0].to_vec(), &[2], &[0.0, 1.0], 0.0, 0.0);
+    assert_values(
+        "mask",
+        &g[0].shape(),
+        &g[0].to_vec(),
+        &[2],
+        &[0.0, 1.0],
+        0.0,
+        0.0,
+    );
     // A parameter made from a computed tensor is a fresh leaf.
     let y = (&x * 3.0).require_grad();
     let g = (&y * 2.0).sum().gradients(&[&y, &x]).unwrap();
-    assert_values("fresh leaf", &g[0].shape(), &g[0].to_vec(), &[2], &[2.0, 2.0], 0.0, 0.0);
-    assert_values("history cut", &g[1].shape(), &g[1].to_vec(), &[2], &[0.0, 0.0], 0.0, 0.0);
+    assert_values(
+        "fresh leaf",
+        &g[0].shape(),
+        &g[0].to_vec(),
+        &[2],
+        &[2.0, 2.0],
+        0.0,
+        0.0,
+    );
+    assert_values(
+        "history cut",
+        &g[1].shape(),
+        &g[1].to_vec(),
+        &[2],
+        &[0.0, 0.0],
+        0.0,
+        0.0,
+    );
 }
 
 fn gradient_errors<B: AutodiffBackend>() {
     let x = tensor::<B>(&[2], &[1.0, 2.0]).require_grad();
     let not_scalar = &x * 2.0;
-    assert!(matches!(not_scalar.gradients(&[&x]), Err(TensorError::NotScalar { .. })));
+    assert!(matches!(
+        not_scalar.gradients(&[&x]),
+        Err(TensorError::NotScalar { .. })
+    ));
+    // Gradients are for leaves made by require_grad: not for constants, not for intermediates.
+    let constant = tensor::<B>(&[2], &[3.0, 4.0]);
+    let loss = (&x * &constant).sum();
+    assert!(matches!(
+        loss.gradients(&[&constant]),
+        Err(TensorError::Backend { .. })
+    ));
+    let intermediate = &x * 2.0;
+    let loss = intermediate.square().sum();
+    assert!(matches!(
+        loss.gradients(&[&intermediate]),
+        Err(TensorError::Backend { .. })
+    ));
 }
 
 /// Burn and libtorch differentiate every case to the same gradients.
@@ -173,7 +271,15 @@ fn burn_and_tch_gradients_agree() {
         let from_burn = case_gradients::<Burn>(case);
         let from_tch = case_gradients::<Tch>(case);
         for (k, (b, t)) in from_burn.iter().zip(&from_tch).enumerate() {
-            assert_values(&format!("{case:?} ∂/∂input{k}"), &b.shape(), &b.to_vec(), &t.shape(), &t.to_vec(), 1e-5, 1e-6);
+            assert_values(
+                &format!("{case:?} ∂/∂input{k}"),
+                &b.shape(),
+                &b.to_vec(),
+                &t.shape(),
+                &t.to_vec(),
+                1e-5,
+                1e-6,
+            );
         }
     }
 }

@@ -67,7 +67,15 @@ pub fn close(got: f32, want: f32, rtol: f32, atol: f32) -> bool {
 
 /// Asserts that `got` has shape `shape` and values within tolerance of `want`.
 #[track_caller]
-pub fn assert_values(what: &str, got_shape: &[usize], got: &[f32], shape: &[usize], want: &[f32], rtol: f32, atol: f32) {
+pub fn assert_values(
+    what: &str,
+    got_shape: &[usize],
+    got: &[f32],
+    shape: &[usize],
+    want: &[f32],
+    rtol: f32,
+    atol: f32,
+) {
     assert_eq!(got_shape, shape, "{what}: shape");
     assert_eq!(got.len(), want.len(), "{what}: number of values");
     for (i, (&g, &w)) in got.iter().zip(want).enumerate() {
@@ -88,7 +96,15 @@ pub fn assert_tensor<B: Backend>(what: &str, got: &Tensor<B>, shape: &[usize], w
 /// Asserts that a tensor on `B` equals the reference backend's result within 1e-5 relative.
 #[track_caller]
 pub fn assert_matches_reference<B: Backend>(what: &str, got: &Tensor<B>, want: &Tensor<Reference>) {
-    assert_values(what, &got.shape(), &got.to_vec(), &want.shape(), &want.to_vec(), 1e-5, 1e-6);
+    assert_values(
+        what,
+        &got.shape(),
+        &got.to_vec(),
+        &want.shape(),
+        &want.to_vec(),
+        1e-5,
+        1e-6,
+    );
 }
 
 /// A tensor from host values on the default device.

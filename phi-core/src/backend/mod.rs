@@ -267,7 +267,11 @@ impl IntBinaryOp {
             IntBinaryOp::FloorDiv => a.div_euclid(b) - i64::from(b < 0 && a.rem_euclid(b) != 0),
             IntBinaryOp::Rem => {
                 let r = a % b;
-                if r != 0 && ((r < 0) != (b < 0)) { r + b } else { r }
+                if r != 0 && ((r < 0) != (b < 0)) {
+                    r + b
+                } else {
+                    r
+                }
             }
             IntBinaryOp::Min => a.min(b),
             IntBinaryOp::Max => a.max(b),
@@ -440,7 +444,11 @@ pub trait Backend: Copy + Clone + Debug + Default + Send + Sync + 'static {
                         vec![Self::float_full(&side_shape, value, &device)]
                     }
                     PadMode::Edge => {
-                        let edge = if at_start { block(0..1, t) } else { block(n - 1..n, t) };
+                        let edge = if at_start {
+                            block(0..1, t)
+                        } else {
+                            block(n - 1..n, t)
+                        };
                         vec![Self::float_broadcast_to(edge, &side_shape)]
                     }
                     PadMode::Periodic => {
@@ -559,7 +567,8 @@ pub trait Backend: Copy + Clone + Debug + Default + Send + Sync + 'static {
     ) -> Result<Self::Float> {
         let shape = Self::float_shape(&tensor);
         let (flat_shape, flat) = flatten_nd_indices::<Self>(&shape, indices, "scatter_add_nd")?;
-        let out = Self::float_scatter_add_rows(Self::float_reshape(tensor, &flat_shape), flat, values)?;
+        let out =
+            Self::float_scatter_add_rows(Self::float_reshape(tensor, &flat_shape), flat, values)?;
         Ok(Self::float_reshape(out, &shape))
     }
 
@@ -609,12 +618,14 @@ pub trait AutodiffBackend: Backend {
     /// [`AutodiffBackend::float_require_grad`] or a result computed from one).
     fn float_is_tracked(tensor: &Self::Float) -> bool;
     /// Backward pass from `loss`, a one-element tensor: `∂loss/∂t` for each `t` in `wrt`, with
-    /// the shape of `t`, as untracked tensors. A tensor that `loss` does not depend on gets zeros.
+    /// the shape of `t`, as untracked tensors. Each `t` is a leaf made by
+    /// [`AutodiffBackend::float_require_grad`]; one that `loss` does not depend on gets zeros.
     /// The graph behind `loss` is consumed: differentiate each loss once.
     ///
     /// # Errors
     /// [`TensorError::NotScalar`] when `loss` has more than one element;
-    /// [`TensorError::Backend`] when the engine refuses (e.g. an untracked tensor in `wrt`).
+    /// [`TensorError::Backend`] when a tensor in `wrt` is not such a leaf (an untracked tensor or
+    /// an intermediate result), or when the engine refuses.
     fn gradients(loss: &Self::Float, wrt: &[&Self::Float]) -> Result<Vec<Self::Float>>;
 }
 

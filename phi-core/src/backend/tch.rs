@@ -15,7 +15,9 @@ use std::ops::Range;
 
 use tch::{Device, Kind, TchError, Tensor};
 
-use super::{AutodiffBackend, Backend, BinaryOp, CompareOp, IntBinaryOp, PadMode, ReduceOp, UnaryOp};
+use super::{
+    AutodiffBackend, Backend, BinaryOp, CompareOp, IntBinaryOp, PadMode, ReduceOp, UnaryOp,
+};
 use crate::error::{Result, TensorError};
 
 /// The libtorch backend. Tensors live on a [`tch::Device`]; the default is the CPU.
@@ -119,7 +121,10 @@ fn slice(tensor: &Tensor, ranges: &[Range<usize>], op: &str) -> Tensor {
             continue;
         }
         let length = range.end.saturating_sub(range.start);
-        out = ok(out.f_narrow(axis as i64, range.start as i64, length as i64), op);
+        out = ok(
+            out.f_narrow(axis as i64, range.start as i64, length as i64),
+            op,
+        );
     }
     out
 }
@@ -140,7 +145,7 @@ fn check_indices(indices: &Tensor, bound: usize, op: &'static str) -> Result<()>
     }
     let extremes = indices
         .f_min()
-        .and_then(|lowest| Ok(Tensor::f_stack(&[lowest, indices.f_max()?], 0)?))
+        .and_then(|lowest| Tensor::f_stack(&[lowest, indices.f_max()?], 0))
         .map_err(backend_error)?;
     let mut host = [0i64; 2];
     extremes.f_copy_data(&mut host, 2).map_err(backend_error)?;
@@ -170,7 +175,10 @@ fn pad_axis(tensor: &Tensor, axis: usize, before: usize, after: usize, mode: Pad
         match mode {
             PadMode::Constant(_) => unreachable!("constant padding is done in one call"),
             PadMode::Edge => {
-                let edge = ok(tensor.f_narrow(dim, if at_start { 0 } else { n - 1 }, 1), OP);
+                let edge = ok(
+                    tensor.f_narrow(dim, if at_start { 0 } else { n - 1 }, 1),
+                    OP,
+                );
                 let mut side_shape = dims(&shape);
                 side_shape[axis] = width;
                 ok(edge.f_expand(side_shape, false), OP)
@@ -182,7 +190,12 @@ fn pad_axis(tensor: &Tensor, axis: usize, before: usize, after: usize, mode: Pad
             PadMode::Symmetric => {
                 // Mirrored including the edge cell: the first `width` cells reversed.
                 let start = if at_start { 0 } else { n - width };
-                ok(tensor.f_narrow(dim, start, width).and_then(|t| t.f_flip([dim])), OP)
+                ok(
+                    tensor
+                        .f_narrow(dim, start, width)
+                        .and_then(|t| t.f_flip([dim])),
+                    OP,
+                )
             }
         }
     };
@@ -289,15 +302,24 @@ impl Backend for Tch {
 
     fn float_full(shape: &[usize], value: f32, device: &Device) -> TchTensor {
         let options = (Kind::Float, *device);
-        float(ok(Tensor::f_full(dims(shape), f64::from(value), options), "float_full"))
+        float(ok(
+            Tensor::f_full(dims(shape), f64::from(value), options),
+            "float_full",
+        ))
     }
 
     fn float_zeros(shape: &[usize], device: &Device) -> TchTensor {
-        float(ok(Tensor::f_zeros(dims(shape), (Kind::Float, *device)), "float_zeros"))
+        float(ok(
+            Tensor::f_zeros(dims(shape), (Kind::Float, *device)),
+            "float_zeros",
+        ))
     }
 
     fn int_arange(n: usize, device: &Device) -> TchIntTensor {
-        int(ok(Tensor::f_arange(n as i64, (Kind::Int64, *device)), "int_arange"))
+        int(ok(
+            Tensor::f_arange(n as i64, (Kind::Int64, *device)),
+            "int_arange",
+        ))
     }
 
     // ---------------------------------------------------------------- shape
@@ -322,7 +344,10 @@ impl Backend for Tch {
     fn float_broadcast_to(tensor: TchTensor, shape: &[usize]) -> TchTensor {
         // A strided view, not a copy: nothing writes into tensors in place, and every later
         // operation (reshape included) copies where the layout needs it.
-        float(ok(tensor.0.f_expand(dims(shape), false), "float_broadcast_to"))
+        float(ok(
+            tensor.0.f_expand(dims(shape), false),
+            "float_broadcast_to",
+        ))
     }
 
     fn float_stack(tensors: Vec<TchTensor>, axis: usize) -> TchTensor {
@@ -331,7 +356,10 @@ impl Backend for Tch {
     }
 
     fn float_pad(tensor: TchTensor, widths: &[(usize, usize)], mode: PadMode) -> TchTensor {
-        if widths.iter().all(|&(before, after)| before == 0 && after == 0) {
+        if widths
+            .iter()
+            .all(|&(before, after)| before == 0 && after == 0)
+        {
             return tensor;
         }
         if let PadMode::Constant(value) = mode {
@@ -408,7 +436,10 @@ impl Backend for Tch {
     }
 
     fn float_clamp(tensor: TchTensor, min: f32, max: f32) -> TchTensor {
-        float(ok(tensor.0.f_clamp(f64::from(min), f64::from(max)), "float_clamp"))
+        float(ok(
+            tensor.0.f_clamp(f64::from(min), f64::from(max)),
+            "float_clamp",
+        ))
     }
 
     fn float_detach(tensor: TchTensor) -> TchTensor {
@@ -445,7 +476,10 @@ impl Backend for Tch {
 
     fn float_where(mask: TchTensor, on_true: TchTensor, on_false: TchTensor) -> TchTensor {
         let condition = ok(mask.0.f_ne(0.0), "float_where");
-        float(ok(on_true.0.f_where_self(&condition, &on_false.0), "float_where"))
+        float(ok(
+            on_true.0.f_where_self(&condition, &on_false.0),
+            "float_where",
+        ))
     }
 
     // ---------------------------------------------------------------- reductions
@@ -485,7 +519,10 @@ impl Backend for Tch {
 
     fn float_gather_rows(tensor: TchTensor, indices: TchIntTensor) -> Result<TchTensor> {
         check_indices(&indices.0, tensor.0.size()[0] as usize, "gather_rows")?;
-        let rows = tensor.0.f_index_select(0, &indices.0).map_err(backend_error)?;
+        let rows = tensor
+            .0
+            .f_index_select(0, &indices.0)
+            .map_err(backend_error)?;
         Ok(float(rows))
     }
 
@@ -497,7 +534,10 @@ impl Backend for Tch {
         check_indices(&indices.0, tensor.0.size()[0] as usize, "scatter_add_rows")?;
         // The out-of-place index_add accumulates repeated indices and is differentiable in both
         // the base tensor and the values.
-        let sum = tensor.0.f_index_add(0, &indices.0, &values.0).map_err(backend_error)?;
+        let sum = tensor
+            .0
+            .f_index_add(0, &indices.0, &values.0)
+            .map_err(backend_error)?;
         Ok(float(sum))
     }
 
@@ -571,7 +611,11 @@ impl Backend for Tch {
                 let n = t.size()[axis];
                 // libtorch has no integer mean; an empty axis keeps its sum, 0, rather than
                 // dividing by zero (which throws).
-                if n == 0 { sum() } else { sum().and_then(|s| s.f_div_scalar_mode(n, "trunc")) }
+                if n == 0 {
+                    sum()
+                } else {
+                    sum().and_then(|s| s.f_div_scalar_mode(n, "trunc"))
+                }
             }
             ReduceOp::Max => t.f_amax(dim, true),
             ReduceOp::Min => t.f_amin(dim, true),
@@ -581,7 +625,10 @@ impl Backend for Tch {
 
     fn int_gather_rows(tensor: TchIntTensor, indices: TchIntTensor) -> Result<TchIntTensor> {
         check_indices(&indices.0, tensor.0.size()[0] as usize, "gather_rows")?;
-        let rows = tensor.0.f_index_select(0, &indices.0).map_err(backend_error)?;
+        let rows = tensor
+            .0
+            .f_index_select(0, &indices.0)
+            .map_err(backend_error)?;
         Ok(int(rows))
     }
 }
@@ -591,7 +638,10 @@ impl AutodiffBackend for Tch {
         // detach gives a fresh leaf sharing the storage (no copy); nothing writes into it, so
         // sharing is safe.
         let leaf = ok(
-            tensor.0.f_detach().and_then(|t| t.f_set_requires_grad(true)),
+            tensor
+                .0
+                .f_detach()
+                .and_then(|t| t.f_set_requires_grad(true)),
             "float_require_grad",
         );
         float(leaf)
@@ -609,30 +659,41 @@ impl AutodiffBackend for Tch {
                 shape,
             });
         }
-        if let Some(position) = wrt.iter().position(|t| !t.0.requires_grad()) {
+        // Only leaves, as on every backend: Burn keeps no gradients for intermediate results.
+        if let Some(position) = wrt
+            .iter()
+            .position(|t| !t.0.requires_grad() || !t.0.is_leaf())
+        {
             return Err(TensorError::Backend {
                 backend: "tch",
                 message: format!(
-                    "gradients: tensor {position} of `wrt` is not tracked (make it with require_grad)"
+                    "gradients: tensor {position} of `wrt` is not a leaf made by require_grad"
                 ),
             });
         }
-        let zeros = |t: &TchTensor| {
-            Tensor::f_zeros(t.0.size(), (Kind::Float, t.0.device())).map(float)
-        };
+        let zeros =
+            |t: &TchTensor| Tensor::f_zeros(t.0.size(), (Kind::Float, t.0.device())).map(float);
         // A loss computed from untracked tensors only has no graph to run backward through; it
         // depends on none of `wrt`.
         if wrt.is_empty() || !loss.0.requires_grad() {
-            return wrt.iter().map(|t| zeros(t).map_err(backend_error)).collect();
+            return wrt
+                .iter()
+                .map(|t| zeros(t).map_err(backend_error))
+                .collect();
         }
         let inputs: Vec<&Tensor> = wrt.iter().map(|t| &t.0).collect();
-        let grads = Tensor::f_run_backward(&[&loss.0], &inputs, false, false).map_err(backend_error)?;
+        let grads =
+            Tensor::f_run_backward(&[&loss.0], &inputs, false, false).map_err(backend_error)?;
         grads
             .into_iter()
             .zip(wrt)
             .map(|(grad, t)| {
                 // An input the loss does not reach comes back undefined.
-                let grad = if grad.defined() { grad.f_detach().map(float) } else { zeros(t) };
+                let grad = if grad.defined() {
+                    grad.f_detach().map(float)
+                } else {
+                    zeros(t)
+                };
                 grad.map_err(backend_error)
             })
             .collect()
@@ -684,7 +745,10 @@ mod tests {
         let total = Tch::float_reduce(ReduceOp::Sum, x.clone());
         assert_eq!(Tch::float_shape(&total), vec![1]);
         assert_eq!(values(&total), vec![9.0]);
-        assert_eq!(values(&Tch::float_reduce(ReduceOp::Max, x.clone())), vec![5.0]);
+        assert_eq!(
+            values(&Tch::float_reduce(ReduceOp::Max, x.clone())),
+            vec![5.0]
+        );
         let rows = Tch::float_reduce_axis(ReduceOp::Min, x.clone(), 1);
         assert_eq!(Tch::float_shape(&rows), vec![2, 1]);
         assert_eq!(values(&rows), vec![-1.0, 2.0]);
@@ -736,7 +800,10 @@ mod tests {
         assert_eq!(Tch::float_shape(&edge), vec![2, 4]);
         assert_eq!(values(&edge), vec![1.0, 2.0, 3.0, 3.0, 1.0, 2.0, 3.0, 3.0]);
         let constant = Tch::float_pad(x, &[(1, 0), (0, 1)], PadMode::Constant(7.0));
-        assert_eq!(values(&constant), vec![7.0, 7.0, 7.0, 7.0, 1.0, 2.0, 3.0, 7.0]);
+        assert_eq!(
+            values(&constant),
+            vec![7.0, 7.0, 7.0, 7.0, 1.0, 2.0, 3.0, 7.0]
+        );
     }
 
     #[test]
@@ -749,7 +816,10 @@ mod tests {
 
         // loss = Σ w ⊙ out, so ∂loss/∂base = w and ∂loss/∂values[i] = w[indices[i]].
         let weights = floats(&[1.0, 10.0, 100.0, 1000.0, 2.0, 20.0], &[3, 2]);
-        let loss = Tch::float_reduce(ReduceOp::Sum, Tch::float_binary(BinaryOp::Mul, out, weights));
+        let loss = Tch::float_reduce(
+            ReduceOp::Sum,
+            Tch::float_binary(BinaryOp::Mul, out, weights),
+        );
         let grads = Tch::gradients(&loss, &[&base, &updates]).unwrap();
         assert_eq!(values(&grads[0]), vec![1.0, 10.0, 100.0, 1000.0, 2.0, 20.0]);
         assert_eq!(values(&grads[1]), vec![2.0, 20.0, 1.0, 10.0, 2.0, 20.0]);
@@ -778,13 +848,31 @@ mod tests {
                 bound: 2
             }
         );
-        let err = Tch::float_scatter_add_rows(x.clone(), ints(&[-1], &[1]), floats(&[0.0, 0.0], &[1, 2]))
-            .unwrap_err();
-        assert!(matches!(err, TensorError::IndexOutOfRange { index: -1, .. }));
+        let err =
+            Tch::float_scatter_add_rows(x.clone(), ints(&[-1], &[1]), floats(&[0.0, 0.0], &[1, 2]))
+                .unwrap_err();
+        assert!(matches!(
+            err,
+            TensorError::IndexOutOfRange { index: -1, .. }
+        ));
         let err = Tch::int_gather_rows(ints(&[1, 2], &[2]), ints(&[5], &[1])).unwrap_err();
-        assert!(matches!(err, TensorError::IndexOutOfRange { index: 5, bound: 2, .. }));
+        assert!(matches!(
+            err,
+            TensorError::IndexOutOfRange {
+                index: 5,
+                bound: 2,
+                ..
+            }
+        ));
         let err = Tch::float_gather_nd(x, ints(&[0, 2], &[1, 2])).unwrap_err();
-        assert!(matches!(err, TensorError::IndexOutOfRange { index: 2, bound: 2, .. }));
+        assert!(matches!(
+            err,
+            TensorError::IndexOutOfRange {
+                index: 2,
+                bound: 2,
+                ..
+            }
+        ));
     }
 
     #[test]
@@ -792,17 +880,26 @@ mod tests {
         let x = Tch::float_require_grad(floats(&[1.0, -2.0, 3.0], &[3]));
         assert!(Tch::float_is_tracked(&x));
         let unused = Tch::float_require_grad(floats(&[5.0, 6.0], &[1, 2]));
-        let loss = Tch::float_reduce(ReduceOp::Sum, Tch::float_binary(BinaryOp::Mul, x.clone(), x.clone()));
+        let loss = Tch::float_reduce(
+            ReduceOp::Sum,
+            Tch::float_binary(BinaryOp::Mul, x.clone(), x.clone()),
+        );
         let grads = Tch::gradients(&loss, &[&x, &unused]).unwrap();
         assert_eq!(values(&grads[0]), vec![2.0, -4.0, 6.0]);
         assert_eq!(Tch::float_shape(&grads[1]), vec![1, 2]);
         assert_eq!(values(&grads[1]), vec![0.0, 0.0]);
 
         // The graph is consumed: a second backward pass is the engine's refusal, not a crash.
-        assert!(matches!(Tch::gradients(&loss, &[&x]), Err(TensorError::Backend { .. })));
+        assert!(matches!(
+            Tch::gradients(&loss, &[&x]),
+            Err(TensorError::Backend { .. })
+        ));
 
         let constant = floats(&[1.0], &[1]);
-        assert!(matches!(Tch::gradients(&loss, &[&constant]), Err(TensorError::Backend { .. })));
+        assert!(matches!(
+            Tch::gradients(&loss, &[&constant]),
+            Err(TensorError::Backend { .. })
+        ));
         let detached = Tch::float_detach(x.clone());
         assert!(!Tch::float_is_tracked(&detached));
         let untracked_loss = Tch::float_reduce(ReduceOp::Sum, detached);

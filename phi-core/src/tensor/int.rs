@@ -78,10 +78,16 @@ impl<B: Backend> IntTensor<B> {
             return Err(TensorError::InvalidArgument {
                 op: "IntTensor::reshape",
                 shape: own,
-                reason: format!("cannot hold the {} elements of shape {shape:?}", numel(shape)),
+                reason: format!(
+                    "cannot hold the {} elements of shape {shape:?}",
+                    numel(shape)
+                ),
             });
         }
-        Ok(Self::from_primitive(B::int_reshape(self.primitive.clone(), shape)))
+        Ok(Self::from_primitive(B::int_reshape(
+            self.primitive.clone(),
+            shape,
+        )))
     }
 
     /// The block given by one range per leading axis; later axes are kept whole.
@@ -90,7 +96,10 @@ impl<B: Backend> IntTensor<B> {
     /// [`TensorError::InvalidArgument`] for a range that does not fit.
     pub fn slice(&self, ranges: &[Range<usize>]) -> Result<Self> {
         let full = full_ranges("IntTensor::slice", &self.shape(), ranges)?;
-        Ok(Self::from_primitive(B::int_slice(self.primitive.clone(), &full)))
+        Ok(Self::from_primitive(B::int_slice(
+            self.primitive.clone(),
+            &full,
+        )))
     }
 
     /// The tensors joined along `axis`.
@@ -99,11 +108,13 @@ impl<B: Backend> IntTensor<B> {
     /// [`TensorError::InvalidArgument`] for an empty list or a missing axis,
     /// [`TensorError::ShapeMismatch`] when the shapes differ off `axis`.
     pub fn concat(tensors: &[IntTensor<B>], axis: usize) -> Result<Self> {
-        let first = tensors.first().ok_or_else(|| TensorError::InvalidArgument {
-            op: "IntTensor::concat",
-            shape: vec![],
-            reason: "needs at least one tensor".into(),
-        })?;
+        let first = tensors
+            .first()
+            .ok_or_else(|| TensorError::InvalidArgument {
+                op: "IntTensor::concat",
+                shape: vec![],
+                reason: "needs at least one tensor".into(),
+            })?;
         let reference = first.shape();
         check_axis("IntTensor::concat", &reference, axis)?;
         for t in &tensors[1..] {
@@ -172,7 +183,11 @@ impl<B: Backend> IntTensor<B> {
                 reason: format!("{op:?} over the empty axis {axis}"),
             });
         }
-        Ok(Self::from_primitive(B::int_reduce_axis(op, self.primitive.clone(), axis)))
+        Ok(Self::from_primitive(B::int_reduce_axis(
+            op,
+            self.primitive.clone(),
+            axis,
+        )))
     }
 
     /// Rows picked by `indices`.
@@ -181,7 +196,8 @@ impl<B: Backend> IntTensor<B> {
     /// [`TensorError::IndexOutOfRange`] for an index outside the first axis.
     pub fn gather_rows(&self, indices: &IntTensor<B>) -> Result<Self> {
         super::check_row_indices("IntTensor::gather_rows", &self.shape(), &indices.shape())?;
-        B::int_gather_rows(self.primitive.clone(), indices.primitive.clone()).map(Self::from_primitive)
+        B::int_gather_rows(self.primitive.clone(), indices.primitive.clone())
+            .map(Self::from_primitive)
     }
 }
 

@@ -139,7 +139,13 @@ impl<B: Backend> Tensor<B> {
     }
 
     /// Normal random values, the same for one `seed` on every backend.
-    pub fn random_normal(shape: &[usize], mean: f32, std: f32, seed: u64, device: &B::Device) -> Self {
+    pub fn random_normal(
+        shape: &[usize],
+        mean: f32,
+        std: f32,
+        seed: u64,
+        device: &B::Device,
+    ) -> Self {
         Self::from_primitive(B::float_random_normal(shape, mean, std, seed, device))
     }
 
@@ -175,10 +181,16 @@ impl<B: Backend> Tensor<B> {
             return Err(TensorError::InvalidArgument {
                 op: "reshape",
                 shape: own,
-                reason: format!("cannot hold the {} elements of shape {shape:?}", numel(shape)),
+                reason: format!(
+                    "cannot hold the {} elements of shape {shape:?}",
+                    numel(shape)
+                ),
             });
         }
-        Ok(Self::from_primitive(B::float_reshape(self.primitive.clone(), shape)))
+        Ok(Self::from_primitive(B::float_reshape(
+            self.primitive.clone(),
+            shape,
+        )))
     }
 
     /// All elements as one axis.
@@ -240,7 +252,10 @@ impl<B: Backend> Tensor<B> {
                 reason: format!("{axes:?} is not a permutation of the axes"),
             });
         }
-        Ok(Self::from_primitive(B::float_permute(self.primitive.clone(), axes)))
+        Ok(Self::from_primitive(B::float_permute(
+            self.primitive.clone(),
+            axes,
+        )))
     }
 
     /// The last two axes swapped.
@@ -268,7 +283,10 @@ impl<B: Backend> Tensor<B> {
     /// or reaches past its axis.
     pub fn slice(&self, ranges: &[Range<usize>]) -> Result<Self> {
         let full = full_ranges("slice", &self.shape(), ranges)?;
-        Ok(Self::from_primitive(B::float_slice(self.primitive.clone(), &full)))
+        Ok(Self::from_primitive(B::float_slice(
+            self.primitive.clone(),
+            &full,
+        )))
     }
 
     /// The elements `range` along `axis`, everything along the other axes.
@@ -289,11 +307,13 @@ impl<B: Backend> Tensor<B> {
     /// [`TensorError::InvalidArgument`] for an empty list or a missing axis,
     /// [`TensorError::ShapeMismatch`] when the shapes differ off `axis`.
     pub fn concat(tensors: &[Tensor<B>], axis: usize) -> Result<Self> {
-        let first = tensors.first().ok_or_else(|| TensorError::InvalidArgument {
-            op: "concat",
-            shape: vec![],
-            reason: "needs at least one tensor".into(),
-        })?;
+        let first = tensors
+            .first()
+            .ok_or_else(|| TensorError::InvalidArgument {
+                op: "concat",
+                shape: vec![],
+                reason: "needs at least one tensor".into(),
+            })?;
         let reference = first.shape();
         check_axis("concat", &reference, axis)?;
         for t in &tensors[1..] {
@@ -323,11 +343,13 @@ impl<B: Backend> Tensor<B> {
     /// [`TensorError::InvalidArgument`] for an empty list or `axis > rank`,
     /// [`TensorError::ShapeMismatch`] when the shapes differ.
     pub fn stack(tensors: &[Tensor<B>], axis: usize) -> Result<Self> {
-        let first = tensors.first().ok_or_else(|| TensorError::InvalidArgument {
-            op: "stack",
-            shape: vec![],
-            reason: "needs at least one tensor".into(),
-        })?;
+        let first = tensors
+            .first()
+            .ok_or_else(|| TensorError::InvalidArgument {
+                op: "stack",
+                shape: vec![],
+                reason: "needs at least one tensor".into(),
+            })?;
         let reference = first.shape();
         if axis > reference.len() {
             return Err(TensorError::InvalidArgument {
@@ -392,7 +414,11 @@ impl<B: Backend> Tensor<B> {
         }
         let mut all = widths.to_vec();
         all.resize(shape.len(), (0, 0));
-        Ok(Self::from_primitive(B::float_pad(self.primitive.clone(), &all, mode)))
+        Ok(Self::from_primitive(B::float_pad(
+            self.primitive.clone(),
+            &all,
+            mode,
+        )))
     }
 
     /// Repeated to `shape` by NumPy broadcasting.
@@ -409,7 +435,10 @@ impl<B: Backend> Tensor<B> {
                 reason: "every axis must be equal or of length 1".into(),
             });
         }
-        Ok(Self::from_primitive(B::float_broadcast_to(self.primitive.clone(), shape)))
+        Ok(Self::from_primitive(B::float_broadcast_to(
+            self.primitive.clone(),
+            shape,
+        )))
     }
 
     // ------------------------------------------------------------------------------ element-wise
@@ -604,7 +633,10 @@ impl<B: Backend> Tensor<B> {
                 reason: format!("{op:?} of no elements"),
             });
         }
-        Ok(Self::from_primitive(B::float_reduce(op, self.primitive.clone())))
+        Ok(Self::from_primitive(B::float_reduce(
+            op,
+            self.primitive.clone(),
+        )))
     }
 
     /// `op` over `axis`; the axis is kept with length 1 when `keep_axis`, removed otherwise
@@ -666,7 +698,10 @@ impl<B: Backend> Tensor<B> {
             }
         };
         let (lhs, rhs) = (expand(self, &lhs_shape), expand(other, &rhs_shape));
-        Ok(Self::from_primitive(B::float_matmul(lhs.primitive, rhs.primitive)))
+        Ok(Self::from_primitive(B::float_matmul(
+            lhs.primitive,
+            rhs.primitive,
+        )))
     }
 
     // ------------------------------------------------------------------------ gather, scatter
@@ -697,7 +732,10 @@ impl<B: Backend> Tensor<B> {
                 op: "scatter_add_rows",
                 lhs: shape,
                 rhs: value_shape,
-                reason: format!("values must have shape {expected:?} for {} indices", index_shape[0]),
+                reason: format!(
+                    "values must have shape {expected:?} for {} indices",
+                    index_shape[0]
+                ),
             });
         }
         B::float_scatter_add_rows(
@@ -802,7 +840,11 @@ fn check_length(op: &'static str, got: usize, shape: &[usize]) -> Result<()> {
 }
 
 /// One range per axis: those given, then whole axes.
-fn full_ranges(op: &'static str, shape: &[usize], ranges: &[Range<usize>]) -> Result<Vec<Range<usize>>> {
+fn full_ranges(
+    op: &'static str,
+    shape: &[usize],
+    ranges: &[Range<usize>],
+) -> Result<Vec<Range<usize>>> {
     if ranges.len() > shape.len() {
         return Err(TensorError::InvalidArgument {
             op,
@@ -815,7 +857,10 @@ fn full_ranges(op: &'static str, shape: &[usize], ranges: &[Range<usize>]) -> Re
             return Err(TensorError::InvalidArgument {
                 op,
                 shape: shape.to_vec(),
-                reason: format!("range {range:?} does not fit axis {axis} of length {}", shape[axis]),
+                reason: format!(
+                    "range {range:?} does not fit axis {axis} of length {}",
+                    shape[axis]
+                ),
             });
         }
     }

@@ -87,7 +87,7 @@ impl<B: Backend> Mul<Tensor<B>> for f32 {
 impl<B: Backend> Sub<&Tensor<B>> for f32 {
     type Output = Tensor<B>;
     fn sub(self, rhs: &Tensor<B>) -> Tensor<B> {
-        -rhs + self
+        rhs.unary(UnaryOp::Neg).binary_scalar(BinaryOp::Add, self)
     }
 }
 impl<B: Backend> Sub<Tensor<B>> for f32 {
@@ -99,7 +99,7 @@ impl<B: Backend> Sub<Tensor<B>> for f32 {
 impl<B: Backend> Div<&Tensor<B>> for f32 {
     type Output = Tensor<B>;
     fn div(self, rhs: &Tensor<B>) -> Tensor<B> {
-        rhs.recip() * self
+        rhs.recip().binary_scalar(BinaryOp::Mul, self)
     }
 }
 impl<B: Backend> Div<Tensor<B>> for f32 {

@@ -7,10 +7,10 @@ use crate::error::{Result, TensorError};
 pub fn broadcast_shapes(op: &'static str, lhs: &[usize], rhs: &[usize]) -> Result<Vec<usize>> {
     let rank = lhs.len().max(rhs.len());
     let mut out = vec![0; rank];
-    for i in 0..rank {
+    for (i, length) in out.iter_mut().enumerate() {
         let a = axis_from_end(lhs, rank - 1 - i);
         let b = axis_from_end(rhs, rank - 1 - i);
-        out[i] = match (a, b) {
+        *length = match (a, b) {
             (a, b) if a == b => a,
             (1, b) => b,
             (a, 1) => a,
@@ -31,7 +31,11 @@ pub fn broadcast_shapes(op: &'static str, lhs: &[usize], rhs: &[usize]) -> Resul
 
 /// Length of the axis `from_end` places before the last one, 1 if the shape is shorter.
 fn axis_from_end(shape: &[usize], from_end: usize) -> usize {
-    if from_end < shape.len() { shape[shape.len() - 1 - from_end] } else { 1 }
+    if from_end < shape.len() {
+        shape[shape.len() - 1 - from_end]
+    } else {
+        1
+    }
 }
 
 /// Whether `from` broadcasts to exactly `to`.
@@ -95,11 +99,17 @@ mod tests {
     #[test]
     fn broadcasting_follows_numpy() {
         assert_eq!(broadcast_shapes("t", &[3, 1], &[4]).unwrap(), vec![3, 4]);
-        assert_eq!(broadcast_shapes("t", &[2, 1, 5], &[3, 1]).unwrap(), vec![2, 3, 5]);
+        assert_eq!(
+            broadcast_shapes("t", &[2, 1, 5], &[3, 1]).unwrap(),
+            vec![2, 3, 5]
+        );
         assert_eq!(broadcast_shapes("t", &[0, 1], &[1, 7]).unwrap(), vec![0, 7]);
         let err = broadcast_shapes("add", &[3, 2], &[3]).unwrap_err();
         let message = err.to_string();
-        assert!(message.contains("[3, 2]") && message.contains("[3]"), "{message}");
+        assert!(
+            message.contains("[3, 2]") && message.contains("[3]"),
+            "{message}"
+        );
         assert!(broadcasts_to(&[1, 3], &[4, 3]));
         assert!(!broadcasts_to(&[2, 3], &[4, 3]));
     }

@@ -1,0 +1,1456 @@
+//! [`NdArray`]: the fast CPU backend, on [`ndarray`] arrays with [`rayon`] for the large kernels.
+//!
+//! Forward only (no autodiff). Tensors are reference-counted [`ArcArray`]s, so the by-value
+//! arguments of the [`Backend`] trait cost a reference count, and permutes, slices and reshapes of
+//! row-major tensors are views that share the buffer. Every result computed here is row-major
+//! (C-contiguous); views with other strides are read correctly wherever they show up.
+//!
+//! Work is split over rayon's thread pool only above [`PAR_THRESHOLD`] elements, so the many small
+//! tensors of a simulation step stay on the calling thread. The parallel kernels are
+//! deterministic: each output element is computed by one task, with the same operations in the
+//! same order as on one thread, so results do not depend on the number of threads.
+
+use std::borrow::Cow;
+use std::ops::Range;
+
+use ndarray::linalg::general_mat_mul;
+use ndarray::{
+    ArcArray, Array, ArrayView1, ArrayView2, ArrayViewMut2, Axis, Ix2, IxDyn, Order, Slice, Zip,
+};
+use rayon::prelude::*;
+
+use super::{Backend, BinaryOp, CompareOp, IntBinaryOp, PadMode, ReduceOp, UnaryOp};
+use crate::error::{Result, TensorError};
+
+/// The CPU backend on ndarray and rayon. Forward only: gradients need the Burn or tch backend.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct NdArray;
+
+/// The one device of [`NdArray`]: the CPU (its threads are rayon's global pool).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct NdArrayDevice;
+
+/// Element count from which element-wise kernels, reductions, gathers and scatters use rayon.
+/// Below it the cost of waking threads exceeds the work.
+pub const PAR_THRESHOLD: usize = 32 * 1024;
+
+/// Smallest piece of a parallel element-wise loop, so that rayon does not split down to single
+/// elements.
+const PAR_MIN_LEN: usize = 4 * 1024;
+
+/// Multiply-adds from which one matrix product is split into blocks of rows.
+const MATMUL_PAR_WORK: usize = 1 << 18;
+
+/// Length of the blocks that a full sum adds up separately before adding the partial sums. Fixed,
+/// so that the rounding does not depend on the number of threads.
+const SUM_BLOCK: usize = 16 * 1024;
+
+/// `f32`s in a 64-byte cache line: the unit in which parallel scatters split columns, so that
+/// threads rarely write to one line.
+const CACHE_LINE_F32: usize = 16;
+
+type Tensor<T> = ArcArray<T, IxDyn>;
+
+impl Backend for NdArray {
+    type Float = ArcArray<f32, IxDyn>;
+    type Int = ArcArray<i64, IxDyn>;
+    type Device = NdArrayDevice;
+
+    // ---------------------------------------------------------------- devices and host transfer
+
+    fn name() -> &'static str {
+        "ndarray"
+    }
+
+    fn default_device() -> NdArrayDevice {
+        NdArrayDevice
+    }
+
+    fn float_device(_tensor: &Self::Float) -> NdArrayDevice {
+        NdArrayDevice
+    }
+
+    fn float_to_device(tensor: Self::Float, _device: &NdArrayDevice) -> Self::Float {
+        tensor
+    }
+
+    fn int_device(_tensor: &Self::Int) -> NdArrayDevice {
+        NdArrayDevice
+    }
+
+    fn int_to_device(tensor: Self::Int, _device: &NdArrayDevice) -> Self::Int {
+        tensor
+    }
+
+    fn float_shape(tensor: &Self::Float) -> Vec<usize> {
+        tensor.shape().to_vec()
+    }
+
+    fn int_shape(tensor: &Self::Int) -> Vec<usize> {
+        tensor.shape().to_vec()
+    }
+
+    fn float_to_vec(tensor: &Self::Float) -> Vec<f32> {
+        standard(tensor).into_owned()
+    }
+
+    fn int_to_vec(tensor: &Self::Int) -> Vec<i64> {
+        standard(tensor).into_owned()
+    }
+
+    // ---------------------------------------------------------------- creation
+
+    fn float_from_vec(data: Vec<f32>, shape: &[usize], _device: &NdArrayDevice) -> Self::Float {
+        from_vec(data, shape)
+    }
+
+    fn int_from_vec(data: Vec<i64>, shape: &[usize], _device: &NdArrayDevice) -> Self::Int {
+        from_vec(data, shape)
+    }
+
+    fn float_full(shape: &[usize], value: f32, _device: &NdArrayDevice) -> Self::Float {
+        ArcArray::from_elem(IxDyn(shape), value)
+    }
+
+    // ---------------------------------------------------------------- shape
+
+    fn float_reshape(tensor: Self::Float, shape: &[usize]) -> Self::Float {
+        reshape(tensor, shape)
+    }
+
+    fn float_permute(tensor: Self::Float, axes: &[usize]) -> Self::Float {
+        tensor.permuted_axes(axes)
+    }
+
+    fn float_slice(tensor: Self::Float, ranges: &[Range<usize>]) -> Self::Float {
+        slice(tensor, ranges)
+    }
+
+    fn float_concat(tensors: Vec<Self::Float>, axis: usize) -> Self::Float {
+        concat(tensors, axis)
+    }
+
+    fn float_broadcast_to(tensor: Self::Float, shape: &[usize]) -> Self::Float {
+        if tensor.shape() == shape {
+            return tensor;
+        }
+        let view = tensor
+            .broadcast(shape)
+            .expect("the front end checked the broadcast");
+        let mut out = Array::from_elem(IxDyn(shape), 0.0);
+        if out.len() >= PAR_THRESHOLD {
+            Zip::from(&mut out).and(&view).par_for_each(|o, &x| *o = x);
+        } else {
+            out.assign(&view);
+        }
+        out.into_shared()
+    }
+
+    fn float_pad(tensor: Self::Float, widths: &[(usize, usize)], mode: PadMode) -> Self::Float {
+        pad(tensor, widths, mode)
+    }
+
+    // ---------------------------------------------------------------- element-wise maths
+
+    fn float_unary(op: UnaryOp, tensor: Self::Float) -> Self::Float {
+        let t = &tensor;
+        match op {
+            UnaryOp::Neg => map(t, |x| -x),
+            UnaryOp::Sqrt => map(t, f32::sqrt),
+            UnaryOp::Exp => map(t, f32::exp),
+            UnaryOp::Log => map(t, f32::ln),
+            UnaryOp::Abs => map(t, f32::abs),
+            UnaryOp::Sin => map(t, f32::sin),
+            UnaryOp::Cos => map(t, f32::cos),
+            UnaryOp::Tanh => map(t, f32::tanh),
+            UnaryOp::Floor => map(t, f32::floor),
+            UnaryOp::Sign => map(t, |x| UnaryOp::Sign.apply(x)),
+            UnaryOp::Relu => map(t, |x| x.max(0.0)),
+            UnaryOp::Recip => map(t, |x| 1.0 / x),
+        }
+    }
+
+    fn float_binary(op: BinaryOp, lhs: Self::Float, rhs: Self::Float) -> Self::Float {
+        let (a, b) = (&lhs, &rhs);
+        // The common operators get their own loop each, so that the compiler vectorises them.
+        match op {
+            BinaryOp::Add => zip2(a, b, |x, y| x + y),
+            BinaryOp::Sub => zip2(a, b, |x, y| x - y),
+            BinaryOp::Mul => zip2(a, b, |x, y| x * y),
+            BinaryOp::Div => zip2(a, b, |x, y| x / y),
+            BinaryOp::Min => zip2(a, b, f32::min),
+            BinaryOp::Max => zip2(a, b, f32::max),
+            BinaryOp::Pow | BinaryOp::Atan2 => zip2(a, b, move |x, y| op.apply(x, y)),
+        }
+    }
+
+    fn float_binary_scalar(op: BinaryOp, lhs: Self::Float, rhs: f32) -> Self::Float {
+        let t = &lhs;
+        match op {
+            BinaryOp::Add => map(t, move |x| x + rhs),
+            BinaryOp::Sub => map(t, move |x| x - rhs),
+            BinaryOp::Mul => map(t, move |x| x * rhs),
+            BinaryOp::Div => map(t, move |x| x / rhs),
+            BinaryOp::Min => map(t, move |x| x.min(rhs)),
+            BinaryOp::Max => map(t, move |x| x.max(rhs)),
+            BinaryOp::Pow if rhs == 2.0 => map(t, |x| x * x),
+            BinaryOp::Pow | BinaryOp::Atan2 => map(t, move |x| op.apply(x, rhs)),
+        }
+    }
+
+    fn float_clamp(tensor: Self::Float, min: f32, max: f32) -> Self::Float {
+        // Comparisons rather than `f32::clamp`, which panics on odd bounds; NaN stays NaN.
+        map(&tensor, move |x| {
+            if x < min {
+                min
+            } else if x > max {
+                max
+            } else {
+                x
+            }
+        })
+    }
+
+    // ---------------------------------------------------------------- comparisons and selection
+
+    fn float_compare(op: CompareOp, lhs: Self::Float, rhs: Self::Float) -> Self::Float {
+        let (a, b) = (&lhs, &rhs);
+        match op {
+            CompareOp::Greater => zip2(a, b, |x, y| mask(x > y)),
+            CompareOp::GreaterEqual => zip2(a, b, |x, y| mask(x >= y)),
+            CompareOp::Less => zip2(a, b, |x, y| mask(x < y)),
+            CompareOp::LessEqual => zip2(a, b, |x, y| mask(x <= y)),
+            CompareOp::Equal => zip2(a, b, |x, y| mask(x == y)),
+            CompareOp::NotEqual => zip2(a, b, |x, y| mask(x != y)),
+        }
+    }
+
+    fn float_compare_scalar(op: CompareOp, lhs: Self::Float, rhs: f32) -> Self::Float {
+        let t = &lhs;
+        match op {
+            CompareOp::Greater => map(t, move |x| mask(x > rhs)),
+            CompareOp::GreaterEqual => map(t, move |x| mask(x >= rhs)),
+            CompareOp::Less => map(t, move |x| mask(x < rhs)),
+            CompareOp::LessEqual => map(t, move |x| mask(x <= rhs)),
+            CompareOp::Equal => map(t, move |x| mask(x == rhs)),
+            CompareOp::NotEqual => map(t, move |x| mask(x != rhs)),
+        }
+    }
+
+    fn float_where(mask: Self::Float, on_true: Self::Float, on_false: Self::Float) -> Self::Float {
+        let select = |m: f32, t: f32, f: f32| if m != 0.0 { t } else { f };
+        let shape = mask.shape();
+        if shape == on_true.shape()
+            && shape == on_false.shape()
+            && let (Some(m), Some(t), Some(f)) =
+                (mask.as_slice(), on_true.as_slice(), on_false.as_slice())
+        {
+            let data = if m.len() >= PAR_THRESHOLD {
+                (m, t, f)
+                    .into_par_iter()
+                    .with_min_len(PAR_MIN_LEN)
+                    .map(|(&m, &t, &f)| select(m, t, f))
+                    .collect()
+            } else {
+                m.iter()
+                    .zip(t)
+                    .zip(f)
+                    .map(|((&m, &t), &f)| select(m, t, f))
+                    .collect()
+            };
+            return from_vec(data, shape);
+        }
+        let shape = broadcast_shape(&broadcast_shape(shape, on_true.shape()), on_false.shape());
+        let views = (
+            mask.broadcast(shape.as_slice()),
+            on_true.broadcast(shape.as_slice()),
+            on_false.broadcast(shape.as_slice()),
+        );
+        let (Some(m), Some(t), Some(f)) = views else {
+            unreachable!("the front end checked that the shapes broadcast")
+        };
+        let mut out = Array::from_elem(IxDyn(&shape), 0.0);
+        let zip = Zip::from(&mut out).and(&m).and(&t).and(&f);
+        if out_len(&shape) >= PAR_THRESHOLD {
+            zip.par_for_each(|o, &m, &t, &f| *o = select(m, t, f));
+        } else {
+            zip.for_each(|o, &m, &t, &f| *o = select(m, t, f));
+        }
+        out.into_shared()
+    }
+
+    // ---------------------------------------------------------------- reductions
+
+    fn float_reduce(op: ReduceOp, tensor: Self::Float) -> Self::Float {
+        let data = standard(&tensor);
+        let value = match op {
+            ReduceOp::Sum => sum(&data),
+            ReduceOp::Mean => sum(&data) / data.len() as f32,
+            ReduceOp::Max => extreme(&data, f32::NEG_INFINITY, f32::max),
+            ReduceOp::Min => extreme(&data, f32::INFINITY, f32::min),
+        };
+        from_vec(vec![value], &[1])
+    }
+
+    fn float_reduce_axis(op: ReduceOp, tensor: Self::Float, axis: usize) -> Self::Float {
+        let n = tensor.shape()[axis];
+        match op {
+            ReduceOp::Sum => reduce_axis(&tensor, axis, Some(0.0), |a, b| a + b),
+            ReduceOp::Mean => {
+                let sums = reduce_axis(&tensor, axis, Some(0.0), |a, b| a + b);
+                let count = n as f32;
+                map(&sums, move |s| s / count)
+            }
+            ReduceOp::Max => reduce_axis(&tensor, axis, None, f32::max),
+            ReduceOp::Min => reduce_axis(&tensor, axis, None, f32::min),
+        }
+    }
+
+    // ---------------------------------------------------------------- matmul
+
+    fn float_matmul(lhs: Self::Float, rhs: Self::Float) -> Self::Float {
+        matmul(&lhs, &rhs)
+    }
+
+    // ---------------------------------------------------------------- gather and scatter
+
+    fn float_gather_rows(tensor: Self::Float, indices: Self::Int) -> Result<Self::Float> {
+        gather_rows(&tensor, &indices, "gather_rows")
+    }
+
+    fn float_scatter_add_rows(
+        tensor: Self::Float,
+        indices: Self::Int,
+        values: Self::Float,
+    ) -> Result<Self::Float> {
+        let rows = standard(&indices);
+        check_indices(&rows, tensor.shape()[0], "scatter_add_rows")?;
+        Ok(scatter_add(tensor, &rows, &values))
+    }
+
+    fn float_gather_nd(tensor: Self::Float, indices: Self::Int) -> Result<Self::Float> {
+        let shape = tensor.shape().to_vec();
+        let (flat_shape, rows) = flat_nd_indices(&shape, &indices, "gather_nd")?;
+        let source = reshape(tensor, &flat_shape);
+        let rows = from_vec(rows, &[indices.shape()[0]]);
+        gather_rows(&source, &rows, "gather_nd")
+    }
+
+    fn float_scatter_add_nd(
+        tensor: Self::Float,
+        indices: Self::Int,
+        values: Self::Float,
+    ) -> Result<Self::Float> {
+        let shape = tensor.shape().to_vec();
+        let (flat_shape, rows) = flat_nd_indices(&shape, &indices, "scatter_add_nd")?;
+        let out = scatter_add(reshape(tensor, &flat_shape), &rows, &values);
+        Ok(reshape(out, &shape))
+    }
+
+    // ---------------------------------------------------------------- casts
+
+    fn float_to_int(tensor: Self::Float) -> Self::Int {
+        // `as` rounds toward zero (and saturates, NaN → 0).
+        map(&tensor, |x| x as i64)
+    }
+
+    fn int_to_float(tensor: Self::Int) -> Self::Float {
+        map(&tensor, |x| x as f32)
+    }
+
+    // ---------------------------------------------------------------- integer tensors
+
+    fn int_reshape(tensor: Self::Int, shape: &[usize]) -> Self::Int {
+        reshape(tensor, shape)
+    }
+
+    fn int_slice(tensor: Self::Int, ranges: &[Range<usize>]) -> Self::Int {
+        slice(tensor, ranges)
+    }
+
+    fn int_concat(tensors: Vec<Self::Int>, axis: usize) -> Self::Int {
+        concat(tensors, axis)
+    }
+
+    fn int_binary(op: IntBinaryOp, lhs: Self::Int, rhs: Self::Int) -> Self::Int {
+        let (a, b) = (&lhs, &rhs);
+        // Wrapping arithmetic and a zero result for a zero divisor: the contract leaves overflow and
+        // division by zero unspecified, and a panic inside a rayon task would take the caller down.
+        match op {
+            IntBinaryOp::Add => zip2(a, b, i64::wrapping_add),
+            IntBinaryOp::Sub => zip2(a, b, i64::wrapping_sub),
+            IntBinaryOp::Mul => zip2(a, b, i64::wrapping_mul),
+            IntBinaryOp::FloorDiv => zip2(a, b, floor_div),
+            IntBinaryOp::Rem => zip2(a, b, floor_rem),
+            IntBinaryOp::Min => zip2(a, b, i64::min),
+            IntBinaryOp::Max => zip2(a, b, i64::max),
+        }
+    }
+
+    fn int_binary_scalar(op: IntBinaryOp, lhs: Self::Int, rhs: i64) -> Self::Int {
+        let t = &lhs;
+        match op {
+            IntBinaryOp::Add => map(t, move |x| x.wrapping_add(rhs)),
+            IntBinaryOp::Sub => map(t, move |x| x.wrapping_sub(rhs)),
+            IntBinaryOp::Mul => map(t, move |x| x.wrapping_mul(rhs)),
+            IntBinaryOp::FloorDiv => map(t, move |x| floor_div(x, rhs)),
+            IntBinaryOp::Rem => map(t, move |x| floor_rem(x, rhs)),
+            IntBinaryOp::Min => map(t, move |x| x.min(rhs)),
+            IntBinaryOp::Max => map(t, move |x| x.max(rhs)),
+        }
+    }
+
+    fn int_clamp(tensor: Self::Int, min: i64, max: i64) -> Self::Int {
+        // Not `Ord::clamp`, which panics when `min > max`.
+        map(&tensor, move |x| x.max(min).min(max))
+    }
+
+    fn int_reduce_axis(op: ReduceOp, tensor: Self::Int, axis: usize) -> Self::Int {
+        let n = tensor.shape()[axis] as i64;
+        match op {
+            ReduceOp::Sum => reduce_axis(&tensor, axis, Some(0), i64::wrapping_add),
+            ReduceOp::Mean => {
+                let sums = reduce_axis(&tensor, axis, Some(0), i64::wrapping_add);
+                // Integer division rounds toward zero, as documented; nothing to average gives 0.
+                map(&sums, move |s| s.checked_div(n).unwrap_or(0))
+            }
+            ReduceOp::Max => reduce_axis(&tensor, axis, None, i64::max),
+            ReduceOp::Min => reduce_axis(&tensor, axis, None, i64::min),
+        }
+    }
+
+    fn int_gather_rows(tensor: Self::Int, indices: Self::Int) -> Result<Self::Int> {
+        gather_rows(&tensor, &indices, "int_gather_rows")
+    }
+}
+
+// -------------------------------------------------------------------- layout and shape helpers
+
+/// A tensor of `shape` holding `data` in row-major order.
+fn from_vec<T>(data: Vec<T>, shape: &[usize]) -> Tensor<T> {
+    ArcArray::from_shape_vec(IxDyn(shape), data).expect("the front end checked the data length")
+}
+
+/// The number of elements of `shape`.
+fn out_len(shape: &[usize]) -> usize {
+    shape.iter().product()
+}
+
+/// The elements of `tensor` in row-major order: borrowed when the tensor is row-major already,
+/// else copied (with a strided loop rather than element-by-element index arithmetic).
+fn standard<T: Copy + Default + Send + Sync>(tensor: &Tensor<T>) -> Cow<'_, [T]> {
+    if let Some(slice) = tensor.as_slice() {
+        return Cow::Borrowed(slice);
+    }
+    let mut out = Array::from_elem(tensor.raw_dim(), T::default());
+    if tensor.len() >= PAR_THRESHOLD {
+        Zip::from(&mut out).and(tensor).par_for_each(|o, &x| *o = x);
+    } else {
+        out.assign(tensor);
+    }
+    Cow::Owned(out.into_raw_vec_and_offset().0)
+}
+
+/// `tensor` under `shape`: a view of the same buffer when the tensor is row-major.
+fn reshape<T: Copy + Default + Send + Sync>(tensor: Tensor<T>, shape: &[usize]) -> Tensor<T> {
+    if tensor.is_standard_layout() {
+        return tensor
+            .into_shape_with_order(IxDyn(shape))
+            .expect("the front end checked the element count");
+    }
+    from_vec(standard(&tensor).into_owned(), shape)
+}
+
+/// A view of the block `ranges` (no copy).
+fn slice<T>(mut tensor: Tensor<T>, ranges: &[Range<usize>]) -> Tensor<T> {
+    tensor.slice_each_axis_inplace(|axis| Slice::from(ranges[axis.axis.index()].clone()));
+    tensor
+}
+
+/// The tensors joined along `axis`, copied block by block: for each index of the axes before
+/// `axis`, one contiguous run of every tensor.
+fn concat<T: Copy + Default + Send + Sync>(tensors: Vec<Tensor<T>>, axis: usize) -> Tensor<T> {
+    if tensors.len() == 1 {
+        return tensors.into_iter().next().expect("one tensor");
+    }
+    let mut shape = tensors[0].shape().to_vec();
+    shape[axis] = tensors.iter().map(|t| t.shape()[axis]).sum();
+    let outer: usize = shape[..axis].iter().product();
+    let inner: usize = shape[axis + 1..].iter().product();
+    let parts: Vec<(Cow<'_, [T]>, usize)> = tensors
+        .iter()
+        .map(|t| (standard(t), t.shape()[axis] * inner))
+        .collect();
+    let mut data = Vec::with_capacity(out_len(&shape));
+    for o in 0..outer {
+        for (part, block) in &parts {
+            data.extend_from_slice(&part[o * block..(o + 1) * block]);
+        }
+    }
+    from_vec(data, &shape)
+}
+
+/// The shape that `a` and `b` broadcast to (NumPy rules; the front end checked that they do).
+fn broadcast_shape(a: &[usize], b: &[usize]) -> Vec<usize> {
+    let rank = a.len().max(b.len());
+    (0..rank)
+        .map(|i| {
+            let da = if i + a.len() >= rank {
+                a[i + a.len() - rank]
+            } else {
+                1
+            };
+            let db = if i + b.len() >= rank {
+                b[i + b.len() - rank]
+            } else {
+                1
+            };
+            if da == 1 { db } else { da }
+        })
+        .collect()
+}
+
+// -------------------------------------------------------------------- element-wise kernels
+
+/// `1.0` for true, `0.0` for false.
+fn mask(condition: bool) -> f32 {
+    if condition { 1.0 } else { 0.0 }
+}
+
+/// `⌊a / b⌋` as Python's `//`, without the panics of `i64` division (zero divisor, overflow).
+fn floor_div(a: i64, b: i64) -> i64 {
+    if b == 0 {
+        return 0;
+    }
+    let q = a.wrapping_div(b);
+    if a.wrapping_rem(b) != 0 && ((a < 0) != (b < 0)) {
+        q - 1
+    } else {
+        q
+    }
+}
+
+/// `a - b·⌊a / b⌋` as Python's `%` (the sign of `b`), without the panics of `i64` division.
+fn floor_rem(a: i64, b: i64) -> i64 {
+    if b == 0 {
+        return 0;
+    }
+    let r = a.wrapping_rem(b);
+    if r != 0 && ((r < 0) != (b < 0)) {
+        r + b
+    } else {
+        r
+    }
+}
+
+/// `f` applied to every element, in a row-major result.
+fn map<T, U, F>(tensor: &Tensor<T>, f: F) -> Tensor<U>
+where
+    T: Copy + Send + Sync,
+    U: Copy + Default + Send + Sync,
+    F: Fn(T) -> U + Send + Sync,
+{
+    let data = match tensor.as_slice() {
+        Some(s) if s.len() >= PAR_THRESHOLD => s
+            .par_iter()
+            .with_min_len(PAR_MIN_LEN)
+            .map(|&x| f(x))
+            .collect(),
+        Some(s) => s.iter().map(|&x| f(x)).collect(),
+        None => {
+            let mut out = Array::from_elem(tensor.raw_dim(), U::default());
+            let zip = Zip::from(&mut out).and(tensor);
+            if tensor.len() >= PAR_THRESHOLD {
+                zip.par_for_each(|o, &x| *o = f(x));
+            } else {
+                zip.for_each(|o, &x| *o = f(x));
+            }
+            return out.into_shared();
+        }
+    };
+    from_vec(data, tensor.shape())
+}
+
+/// `f(a, b)` element by element with NumPy broadcasting, in a row-major result.
+fn zip2<T, U, F>(a: &Tensor<T>, b: &Tensor<T>, f: F) -> Tensor<U>
+where
+    T: Copy + Send + Sync,
+    U: Copy + Default + Send + Sync,
+    F: Fn(T, T) -> U + Send + Sync,
+{
+    let shape = broadcast_shape(a.shape(), b.shape());
+    // Fast paths: two row-major operands of one shape, or one operand against a single value.
+    if a.shape() == b.shape()
+        && let (Some(x), Some(y)) = (a.as_slice(), b.as_slice())
+    {
+        let data = if x.len() >= PAR_THRESHOLD {
+            (x, y)
+                .into_par_iter()
+                .with_min_len(PAR_MIN_LEN)
+                .map(|(&x, &y)| f(x, y))
+                .collect()
+        } else {
+            x.iter().zip(y).map(|(&x, &y)| f(x, y)).collect()
+        };
+        return from_vec(data, &shape);
+    }
+    if b.len() == 1 && a.shape() == shape.as_slice() {
+        let y = *b.iter().next().expect("one element");
+        return map(a, |x| f(x, y));
+    }
+    if a.len() == 1 && b.shape() == shape.as_slice() {
+        let x = *a.iter().next().expect("one element");
+        return map(b, |y| f(x, y));
+    }
+    let (Some(x), Some(y)) = (a.broadcast(shape.as_slice()), b.broadcast(shape.as_slice())) else {
+        unreachable!("the front end checked that the shapes broadcast")
+    };
+    let mut out = Array::from_elem(IxDyn(&shape), U::default());
+    let zip = Zip::from(&mut out).and(&x).and(&y);
+    if out_len(&shape) >= PAR_THRESHOLD {
+        zip.par_for_each(|o, &x, &y| *o = f(x, y));
+    } else {
+        zip.for_each(|o, &x, &y| *o = f(x, y));
+    }
+    out.into_shared()
+}
+
+// -------------------------------------------------------------------- reductions
+
+/// The sum of `data`, in fixed blocks (vectorised within a block), so that the result is the
+/// same with and without threads.
+fn sum(data: &[f32]) -> f32 {
+    let block_sum = |block: &[f32]| ArrayView1::from(block).sum();
+    let partials: Vec<f32> = if data.len() >= PAR_THRESHOLD {
+        data.par_chunks(SUM_BLOCK).map(block_sum).collect()
+    } else {
+        data.chunks(SUM_BLOCK).map(block_sum).collect()
+    };
+    partials.iter().sum()
+}
+
+/// The fold of `data` with `pick` (`f32::max` or `f32::min`), which is exact in any order.
+fn extreme(data: &[f32], init: f32, pick: fn(f32, f32) -> f32) -> f32 {
+    if data.len() >= PAR_THRESHOLD {
+        data.par_chunks(SUM_BLOCK)
+            .map(|c| c.iter().fold(init, |a, &b| pick(a, b)))
+            .reduce(|| init, pick)
+    } else {
+        data.iter().fold(init, |a, &b| pick(a, b))
+    }
+}
+
+/// `f` folded over `axis` (kept with length 1). `init` starts the fold, or the first element along
+/// the axis does when it is `None` (max, min).
+///
+/// The tensor is seen as `[outer, n, inner]`; each output row `[inner]` accumulates the `n` input
+/// rows in order, which vectorises over `inner` and keeps the rounding independent of threads.
+fn reduce_axis<T, F>(tensor: &Tensor<T>, axis: usize, init: Option<T>, f: F) -> Tensor<T>
+where
+    T: Copy + Default + Send + Sync,
+    F: Fn(T, T) -> T + Send + Sync,
+{
+    let shape = tensor.shape();
+    let n = shape[axis];
+    let outer: usize = shape[..axis].iter().product();
+    let inner: usize = shape[axis + 1..].iter().product();
+    let mut out_shape = shape.to_vec();
+    out_shape[axis] = 1;
+    if outer * inner == 0 {
+        return from_vec(Vec::new(), &out_shape);
+    }
+    if n == 0 {
+        // Max and min of nothing are never asked for; the sum of nothing is `init`.
+        return from_vec(vec![init.unwrap_or_default(); outer * inner], &out_shape);
+    }
+    let data = standard(tensor);
+    let mut out = vec![T::default(); outer * inner];
+    // Columns `cols` of the `n` rows in `src` ([n, inner]) folded into `dst`.
+    let fold_block = |src: &[T], cols: Range<usize>, dst: &mut [T]| {
+        let first = match init {
+            Some(value) => {
+                dst.fill(value);
+                0
+            }
+            None => {
+                dst.copy_from_slice(&src[cols.clone()]);
+                1
+            }
+        };
+        for k in first..n {
+            let row = &src[k * inner + cols.start..k * inner + cols.end];
+            for (d, &s) in dst.iter_mut().zip(row) {
+                *d = f(*d, s);
+            }
+        }
+    };
+    let block = n * inner;
+    if data.len() < PAR_THRESHOLD {
+        for (src, dst) in data.chunks(block).zip(out.chunks_mut(inner)) {
+            fold_block(src, 0..inner, dst);
+        }
+    } else if outer >= rayon::current_num_threads() {
+        let min_len = (PAR_MIN_LEN / block).max(1);
+        data.par_chunks(block)
+            .zip(out.par_chunks_mut(inner))
+            .with_min_len(min_len)
+            .for_each(|(src, dst)| fold_block(src, 0..inner, dst));
+    } else {
+        // Few output rows (a reduction over a leading axis): split the columns instead.
+        let cols = (PAR_MIN_LEN / n).clamp(16, inner.max(16));
+        for (src, dst) in data.chunks(block).zip(out.chunks_mut(inner)) {
+            dst.par_chunks_mut(cols).enumerate().for_each(|(c, dst)| {
+                let start = c * cols;
+                fold_block(src, start..start + dst.len(), dst);
+            });
+        }
+    }
+    from_vec(out, &out_shape)
+}
+
+// -------------------------------------------------------------------- matmul
+
+/// Batched matrix product; see [`Backend::float_matmul`].
+fn matmul(lhs: &Tensor<f32>, rhs: &Tensor<f32>) -> Tensor<f32> {
+    let rank = lhs.ndim();
+    let (m, k, n) = (
+        lhs.shape()[rank - 2],
+        lhs.shape()[rank - 1],
+        rhs.shape()[rank - 1],
+    );
+    let batch: usize = lhs.shape()[..rank - 2].iter().product();
+    let mut out_shape = lhs.shape()[..rank - 2].to_vec();
+    out_shape.extend([m, n]);
+    let mut out = vec![0.0; batch * m * n];
+    if out.is_empty() || k == 0 {
+        return from_vec(out, &out_shape);
+    }
+    if rank == 2 {
+        // Any strides will do for the gemm kernel: no copy for transposed or sliced operands.
+        let a = lhs.view().into_dimensionality::<Ix2>().expect("rank 2");
+        let b = rhs.view().into_dimensionality::<Ix2>().expect("rank 2");
+        gemm(a, b, &mut out);
+        return from_vec(out, &out_shape);
+    }
+    let a = lhs
+        .to_shape(((batch, m, k), Order::RowMajor))
+        .expect("same element count");
+    let b = rhs
+        .to_shape(((batch, k, n), Order::RowMajor))
+        .expect("same element count");
+    let one = |(i, dst): (usize, &mut [f32])| {
+        gemm(a.index_axis(Axis(0), i), b.index_axis(Axis(0), i), dst);
+    };
+    if batch > 1 && batch * m * n * k >= MATMUL_PAR_WORK {
+        out.par_chunks_mut(m * n).enumerate().for_each(one);
+    } else {
+        out.chunks_mut(m * n).enumerate().for_each(one);
+    }
+    from_vec(out, &out_shape)
+}
+
+/// `out = a · b` for one matrix pair (`out` row-major `[m, n]`), split into blocks of rows on
+/// rayon when the product is large. matrixmultiply itself runs on one thread.
+fn gemm(a: ArrayView2<'_, f32>, b: ArrayView2<'_, f32>, out: &mut [f32]) {
+    let ((m, k), n) = (a.dim(), b.ncols());
+    let threads = rayon::current_num_threads();
+    if m * k * n < MATMUL_PAR_WORK || threads == 1 || m < 32 {
+        let mut c = ArrayViewMut2::from_shape((m, n), out).expect("output sized m × n");
+        general_mat_mul(1.0, &a, &b, 0.0, &mut c);
+        return;
+    }
+    // Several blocks per thread for balance, each a multiple of the kernel's 16-row tiles.
+    let rows = m.div_ceil(threads * 4).max(32).next_multiple_of(16);
+    out.par_chunks_mut(rows * n)
+        .enumerate()
+        .for_each(|(i, dst)| {
+            let start = i * rows;
+            let count = dst.len() / n;
+            let a = a.slice_axis(Axis(0), Slice::from(start..start + count));
+            let mut c =
+                ArrayViewMut2::from_shape((count, n), dst).expect("output block sized rows × n");
+            general_mat_mul(1.0, &a, &b, 0.0, &mut c);
+        });
+}
+
+// -------------------------------------------------------------------- gather and scatter
+
+/// `Ok` when every index lies in `0..bound`, else the first one that does not.
+fn check_indices(indices: &[i64], bound: usize, op: &'static str) -> Result<()> {
+    // A branch-free pass first (negative indices wrap to huge unsigned values), which vectorises;
+    // the search for the culprit only runs on failure.
+    let valid = indices
+        .iter()
+        .fold(true, |valid, &i| valid & ((i as u64) < bound as u64));
+    if valid {
+        return Ok(());
+    }
+    let outside = |&&i: &&i64| usize::try_from(i).map_or(true, |i| i >= bound);
+    match indices.iter().find(outside) {
+        Some(&index) => Err(TensorError::IndexOutOfRange { op, index, bound }),
+        None => Ok(()),
+    }
+}
+
+/// Rows of `tensor` picked by `indices` (checked here); see [`Backend::float_gather_rows`].
+fn gather_rows<T: Copy + Default + Send + Sync>(
+    tensor: &Tensor<T>,
+    indices: &Tensor<i64>,
+    op: &'static str,
+) -> Result<Tensor<T>> {
+    let rows = standard(indices);
+    check_indices(&rows, tensor.shape()[0], op)?;
+    let mut out_shape = tensor.shape().to_vec();
+    out_shape[0] = rows.len();
+    let width: usize = tensor.shape()[1..].iter().product();
+    if width == 0 || rows.is_empty() {
+        return Ok(from_vec(Vec::new(), &out_shape));
+    }
+    let source = standard(tensor);
+    let mut data = vec![T::default(); rows.len() * width];
+    if data.len() >= PAR_THRESHOLD {
+        // Tasks of a few thousand elements: a single narrow row is too little work to schedule.
+        let per_task = (PAR_MIN_LEN / width).max(1);
+        data.par_chunks_mut(per_task * width)
+            .zip(rows.par_chunks(per_task))
+            .for_each(|(dst, rows)| gather_into(&source, width, rows, dst));
+    } else {
+        gather_into(&source, width, &rows, &mut data);
+    }
+    Ok(from_vec(data, &out_shape))
+}
+
+/// `dst[i] = source[rows[i]]` for rows of `width` elements.
+fn gather_into<T: Copy>(source: &[T], width: usize, rows: &[i64], dst: &mut [T]) {
+    // Narrow rows (scalars, 2-D and 3-D vectors) as fixed-size arrays: one register move per row
+    // rather than a call to memcpy.
+    match width {
+        1 => gather_fixed::<T, 1>(source, rows, dst),
+        2 => gather_fixed::<T, 2>(source, rows, dst),
+        3 => gather_fixed::<T, 3>(source, rows, dst),
+        4 => gather_fixed::<T, 4>(source, rows, dst),
+        _ => {
+            for (dst, &r) in dst.chunks_exact_mut(width).zip(rows) {
+                dst.copy_from_slice(&source[r as usize * width..(r as usize + 1) * width]);
+            }
+        }
+    }
+}
+
+/// [`gather_into`] for rows of `W` elements.
+fn gather_fixed<T: Copy, const W: usize>(source: &[T], rows: &[i64], dst: &mut [T]) {
+    let (source, _) = source.as_chunks::<W>();
+    let (dst, _) = dst.as_chunks_mut::<W>();
+    for (dst, &r) in dst.iter_mut().zip(rows) {
+        *dst = source[r as usize];
+    }
+}
+
+/// `dst[rows[i]] += values[i]` for rows of `width` elements, in the order of `i`.
+fn scatter_add_into(dst: &mut [f32], width: usize, rows: &[i64], values: &[f32]) {
+    match width {
+        1 => scatter_add_fixed::<1>(dst, rows, values),
+        2 => scatter_add_fixed::<2>(dst, rows, values),
+        3 => scatter_add_fixed::<3>(dst, rows, values),
+        4 => scatter_add_fixed::<4>(dst, rows, values),
+        _ => {
+            for (&r, src) in rows.iter().zip(values.chunks_exact(width)) {
+                let row = &mut dst[r as usize * width..(r as usize + 1) * width];
+                for (d, &v) in row.iter_mut().zip(src) {
+                    *d += v;
+                }
+            }
+        }
+    }
+}
+
+/// [`scatter_add_into`] for rows of `W` elements.
+fn scatter_add_fixed<const W: usize>(dst: &mut [f32], rows: &[i64], values: &[f32]) {
+    let (dst, _) = dst.as_chunks_mut::<W>();
+    let (values, _) = values.as_chunks::<W>();
+    for (&r, src) in rows.iter().zip(values) {
+        for (d, &v) in dst[r as usize].iter_mut().zip(src) {
+            *d += v;
+        }
+    }
+}
+
+/// `tensor` with `values[i]` added to row `rows[i]` (rows already checked); repeated rows
+/// accumulate in the order of `i`.
+///
+/// In parallel, each task owns a disjoint part of the output and applies the updates that fall
+/// into it in the original order, so the result is bit for bit the sequential one, with no
+/// atomics and no write conflicts. Wide rows are split by columns, narrow rows by destination row
+/// ranges.
+fn scatter_add(tensor: Tensor<f32>, rows: &[i64], values: &Tensor<f32>) -> Tensor<f32> {
+    // Reuses the buffer when this is its only owner and it is row-major, else copies once.
+    let mut out = if tensor.is_standard_layout() {
+        tensor.into_owned()
+    } else {
+        tensor.as_standard_layout().into_owned()
+    };
+    let n = out.shape()[0];
+    let width: usize = out.shape()[1..].iter().product();
+    if width == 0 || rows.is_empty() {
+        return out.into_shared();
+    }
+    let values = standard(values);
+    let dst = out.as_slice_mut().expect("row-major");
+    let add = |dst: &mut [f32], i: usize| {
+        for (d, &v) in dst.iter_mut().zip(&values[i * width..(i + 1) * width]) {
+            *d += v;
+        }
+    };
+    let threads = rayon::current_num_threads();
+    let work = rows.len() * width;
+    // Wide rows: split the columns in whole cache lines. Every task streams through all the
+    // values in order, which keeps the hardware prefetcher busy, and load is even however the
+    // indices cluster.
+    let blocks = threads.min(width / CACHE_LINE_F32);
+    if work >= PAR_THRESHOLD && blocks >= 2 {
+        let cols = width.div_ceil(blocks).next_multiple_of(CACHE_LINE_F32);
+        let mut grid = ArrayViewMut2::from_shape((n, width), dst).expect("rows × width");
+        grid.axis_chunks_iter_mut(Axis(1), cols)
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(c, mut block)| {
+                let (start, len) = (c * cols, block.ncols());
+                for (i, &r) in rows.iter().enumerate() {
+                    let dst = block.row_mut(r as usize).into_slice().expect("unit stride");
+                    let src = &values[i * width + start..i * width + start + len];
+                    for (d, &v) in dst.iter_mut().zip(src) {
+                        *d += v;
+                    }
+                }
+            });
+        return out.into_shared();
+    }
+    // Narrow rows: one destination row range per thread; every task scans all the indices and
+    // applies those in its range. Scanning costs far less than sorting the updates by range
+    // (which would be a sequential pass as slow as the scatter itself), but it is repeated per
+    // thread, so it pays only for more work than the other kernels need.
+    if work < 4 * PAR_THRESHOLD || threads == 1 || n < 2 {
+        scatter_add_into(dst, width, rows, &values);
+        return out.into_shared();
+    }
+    let per_range = n.div_ceil(threads);
+    dst.par_chunks_mut(per_range * width)
+        .enumerate()
+        .for_each(|(b, dst)| {
+            let base = b * per_range;
+            for (i, &r) in rows.iter().enumerate() {
+                // Rows below `base` wrap around to huge values and fail the test too.
+                let local = (r as usize).wrapping_sub(base);
+                if local < per_range {
+                    add(&mut dst[local * width..(local + 1) * width], i);
+                }
+            }
+        });
+    out.into_shared()
+}
+
+/// Row indices into `tensor` reshaped to `[d₀·…·d_{k-1}, rest...]` for multi-indices `[m, k]`,
+/// each component checked against its own axis (an out-of-range component could otherwise alias a
+/// valid flat row). Returns the reshaped shape and the flat indices.
+fn flat_nd_indices(
+    shape: &[usize],
+    indices: &Tensor<i64>,
+    op: &'static str,
+) -> Result<(Vec<usize>, Vec<i64>)> {
+    let (m, k) = (indices.shape()[0], indices.shape()[1]);
+    let data = standard(indices);
+    let mut flat = Vec::with_capacity(m);
+    if k > 0 {
+        for multi in data.chunks_exact(k) {
+            let mut row = 0i64;
+            for (&index, &bound) in multi.iter().zip(shape) {
+                if usize::try_from(index).map_or(true, |i| i >= bound) {
+                    return Err(TensorError::IndexOutOfRange { op, index, bound });
+                }
+                row = row * bound as i64 + index;
+            }
+            flat.push(row);
+        }
+    }
+    let mut flat_shape = vec![shape[..k].iter().product()];
+    flat_shape.extend_from_slice(&shape[k..]);
+    Ok((flat_shape, flat))
+}
+
+// -------------------------------------------------------------------- padding
+
+/// The source index along an axis of length `n` for output cell `o`, padded by `before` cells
+/// in front; `None` for a constant cell.
+fn pad_source(o: usize, n: usize, before: usize, mode: PadMode) -> Option<usize> {
+    if (before..before + n).contains(&o) {
+        return Some(o - before);
+    }
+    if n == 0 {
+        return None;
+    }
+    match mode {
+        PadMode::Constant(_) => None,
+        PadMode::Edge => Some(if o < before { 0 } else { n - 1 }),
+        PadMode::Periodic => Some((o as isize - before as isize).rem_euclid(n as isize) as usize),
+        PadMode::Symmetric => {
+            // Mirror around the edge cell, reflecting again for widths beyond the axis.
+            let period = 2 * n;
+            let offset = (o as isize - before as isize).rem_euclid(period as isize) as usize;
+            Some(if offset < n {
+                offset
+            } else {
+                period - 1 - offset
+            })
+        }
+    }
+}
+
+/// What [`pad_fill`] needs besides its position: the source and, per axis, where each output
+/// cell comes from.
+struct PadPlan<'a> {
+    source: &'a [f32],
+    source_strides: Vec<usize>,
+    /// Per axis, the source index of each output cell (`None`: the constant).
+    maps: Vec<Vec<Option<usize>>>,
+    /// Per axis, the untouched run: output offset, source length.
+    interior: Vec<(usize, usize)>,
+    fill: f32,
+}
+
+/// Fills `out` (one output block spanning `axis..`) from the source block at `offset`.
+fn pad_fill(plan: &PadPlan<'_>, axis: usize, offset: usize, out: &mut [f32]) {
+    let map = &plan.maps[axis];
+    if axis + 1 == plan.maps.len() {
+        let (before, n) = plan.interior[axis];
+        out[before..before + n].copy_from_slice(&plan.source[offset..offset + n]);
+        let edges = (0..before).chain(before + n..map.len());
+        for o in edges {
+            out[o] = map[o].map_or(plan.fill, |s| plan.source[offset + s]);
+        }
+        return;
+    }
+    let block = out.len() / map.len();
+    for (o, out) in out.chunks_exact_mut(block).enumerate() {
+        pad_entry(plan, axis, o, offset, out);
+    }
+}
+
+/// Fills output entry `o` of `axis` (`out` spans the axes after it).
+fn pad_entry(plan: &PadPlan<'_>, axis: usize, o: usize, offset: usize, out: &mut [f32]) {
+    match plan.maps[axis][o] {
+        Some(s) => pad_fill(plan, axis + 1, offset + s * plan.source_strides[axis], out),
+        None => out.fill(plan.fill),
+    }
+}
+
+/// Native padding in one pass over the output; see [`Backend::float_pad`].
+fn pad(tensor: Tensor<f32>, widths: &[(usize, usize)], mode: PadMode) -> Tensor<f32> {
+    if widths
+        .iter()
+        .all(|&(before, after)| before == 0 && after == 0)
+    {
+        return tensor;
+    }
+    let shape = tensor.shape().to_vec();
+    let out_shape: Vec<usize> = shape
+        .iter()
+        .zip(widths)
+        .map(|(&n, &(before, after))| before + n + after)
+        .collect();
+    let total = out_len(&out_shape);
+    if total == 0 {
+        return from_vec(Vec::new(), &out_shape);
+    }
+    let source = standard(&tensor);
+    let mut source_strides = vec![1; shape.len()];
+    for axis in (0..shape.len().saturating_sub(1)).rev() {
+        source_strides[axis] = source_strides[axis + 1] * shape[axis + 1];
+    }
+    let plan = PadPlan {
+        source: &source,
+        source_strides,
+        maps: shape
+            .iter()
+            .zip(&out_shape)
+            .zip(widths)
+            .map(|((&n, &len), &(before, _))| {
+                (0..len).map(|o| pad_source(o, n, before, mode)).collect()
+            })
+            .collect(),
+        interior: shape
+            .iter()
+            .zip(widths)
+            .map(|(&n, &(before, _))| (before, n))
+            .collect(),
+        fill: match mode {
+            PadMode::Constant(value) => value,
+            _ => 0.0,
+        },
+    };
+    let mut out = vec![0.0; total];
+    if shape.len() > 1 && total >= PAR_THRESHOLD {
+        let block = total / out_shape[0];
+        out.par_chunks_mut(block)
+            .enumerate()
+            .for_each(|(o, out)| pad_entry(&plan, 0, o, 0, out));
+    } else {
+        pad_fill(&plan, 0, 0, &mut out);
+    }
+    from_vec(out, &out_shape)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    type B = NdArray;
+    const D: NdArrayDevice = NdArrayDevice;
+
+    fn f(data: &[f32], shape: &[usize]) -> Tensor<f32> {
+        B::float_from_vec(data.to_vec(), shape, &D)
+    }
+
+    fn i(data: &[i64], shape: &[usize]) -> Tensor<i64> {
+        B::int_from_vec(data.to_vec(), shape, &D)
+    }
+
+    fn seq(n: usize) -> Vec<f32> {
+        (0..n).map(|x| x as f32).collect()
+    }
+
+    /// Reference broadcasting by index arithmetic.
+    fn reference_binary(
+        a: &[f32],
+        sa: &[usize],
+        b: &[f32],
+        sb: &[usize],
+        g: fn(f32, f32) -> f32,
+    ) -> Vec<f32> {
+        let shape = broadcast_shape(sa, sb);
+        let rank = shape.len();
+        let pick = |data: &[f32], s: &[usize], index: &[usize]| {
+            let offset = rank - s.len();
+            let mut flat = 0;
+            for (axis, &len) in s.iter().enumerate() {
+                flat = flat * len + if len == 1 { 0 } else { index[axis + offset] };
+            }
+            data[flat]
+        };
+        let mut out = Vec::new();
+        for flat in 0..out_len(&shape) {
+            let mut index = vec![0; rank];
+            let mut rest = flat;
+            for axis in (0..rank).rev() {
+                index[axis] = rest % shape[axis];
+                rest /= shape[axis];
+            }
+            out.push(g(pick(a, sa, &index), pick(b, sb, &index)));
+        }
+        out
+    }
+
+    #[test]
+    fn broadcasting_across_ranks() {
+        let cases: [(&[usize], &[usize]); 6] = [
+            (&[3], &[2, 1]),
+            (&[2, 1, 3], &[4, 1]),
+            (&[1], &[2, 3]),
+            (&[2, 3], &[1, 1, 1]),
+            (&[5, 1, 4], &[5, 3, 1]),
+            (&[0, 3], &[1, 3]),
+        ];
+        for (sa, sb) in cases {
+            let (a, b) = (
+                seq(out_len(sa)),
+                seq(out_len(sb)).iter().map(|x| x + 0.5).collect::<Vec<_>>(),
+            );
+            let out = B::float_binary(BinaryOp::Sub, f(&a, sa), f(&b, sb));
+            assert_eq!(
+                B::float_shape(&out),
+                broadcast_shape(sa, sb),
+                "{sa:?} {sb:?}"
+            );
+            assert_eq!(
+                B::float_to_vec(&out),
+                reference_binary(&a, sa, &b, sb, |x, y| x - y)
+            );
+            let cmp = B::float_compare(CompareOp::Greater, f(&b, sb), f(&a, sa));
+            assert_eq!(
+                B::float_to_vec(&cmp),
+                reference_binary(&b, sb, &a, sa, |x, y| mask(x > y))
+            );
+        }
+        // Large enough for the parallel path.
+        let a = seq(300 * 128);
+        let b = seq(128);
+        let out = B::float_binary(BinaryOp::Mul, f(&a, &[300, 128]), f(&b, &[128]));
+        assert_eq!(
+            B::float_to_vec(&out),
+            reference_binary(&a, &[300, 128], &b, &[128], |x, y| x * y)
+        );
+    }
+
+    #[test]
+    fn where_broadcasts_all_three() {
+        let m = f(&[1.0, 0.0], &[2, 1]);
+        let t = f(&[1.0, 2.0, 3.0], &[3]);
+        let e = f(&[-1.0], &[1, 1, 1]);
+        let out = B::float_where(m, t, e);
+        assert_eq!(B::float_shape(&out), vec![1, 2, 3]);
+        assert_eq!(B::float_to_vec(&out), vec![1.0, 2.0, 3.0, -1.0, -1.0, -1.0]);
+    }
+
+    #[test]
+    fn views_read_in_row_major_order() {
+        let t = f(&seq(24), &[2, 3, 4]);
+        let p = B::float_permute(t.clone(), &[2, 0, 1]);
+        assert_eq!(B::float_shape(&p), vec![4, 2, 3]);
+        let expected: Vec<f32> = (0..4)
+            .flat_map(|k| {
+                (0..2).flat_map(move |a| (0..3).map(move |b| (a * 12 + b * 4 + k) as f32))
+            })
+            .collect();
+        assert_eq!(B::float_to_vec(&p), expected);
+        assert_eq!(
+            B::float_to_vec(&B::float_reshape(p.clone(), &[8, 3])),
+            expected
+        );
+        assert_eq!(
+            B::float_to_vec(&B::float_unary(UnaryOp::Neg, p)),
+            expected.iter().map(|x| -x).collect::<Vec<_>>()
+        );
+
+        let s = B::float_slice(t.clone(), &[1..2, 0..3, 1..3]);
+        assert_eq!(
+            B::float_to_vec(&s),
+            vec![13.0, 14.0, 17.0, 18.0, 21.0, 22.0]
+        );
+        let empty = B::float_slice(t.clone(), &[0..2, 3..3, 0..4]);
+        assert_eq!(B::float_shape(&empty), vec![2, 0, 4]);
+        assert!(B::float_to_vec(&empty).is_empty());
+
+        let b = B::float_broadcast_to(f(&[1.0, 2.0], &[2, 1]), &[3, 2, 2]);
+        assert_eq!(B::float_to_vec(&b), [1.0, 1.0, 2.0, 2.0].repeat(3));
+
+        let c = B::float_concat([s.clone(), f(&[0.5, 0.5, 0.5], &[1, 3, 1])].into(), 2);
+        assert_eq!(
+            B::float_to_vec(&c),
+            vec![13.0, 14.0, 0.5, 17.0, 18.0, 0.5, 21.0, 22.0, 0.5]
+        );
+    }
+
+    #[test]
+    fn scatter_add_accumulates_repeated_indices() {
+        let t = f(&[1.0, 1.0, 1.0, 1.0, 1.0, 1.0], &[3, 2]);
+        let out =
+            B::float_scatter_add_rows(t, i(&[2, 0, 2, 2], &[4]), f(&seq(8), &[4, 2])).unwrap();
+        assert_eq!(B::float_to_vec(&out), vec![3.0, 4.0, 1.0, 1.0, 11.0, 14.0]);
+
+        // Parallel paths (narrow and wide rows, clustered and spread indices) against a plain loop.
+        for (width, m) in [(1, 150_000), (2, 70_000), (40, 4000), (128, 1000)] {
+            let n = 1000;
+            let rows: Vec<i64> = (0..m)
+                .map(|k| ((k * 7919) % n / if k % 3 == 0 { 50 } else { 1 }) as i64)
+                .collect();
+            let values: Vec<f32> = (0..m * width)
+                .map(|k| ((k % 97) as f32) * 0.37 - 3.0)
+                .collect();
+            let base: Vec<f32> = (0..n * width).map(|k| (k % 13) as f32).collect();
+            let mut expected = base.clone();
+            for (k, &r) in rows.iter().enumerate() {
+                for c in 0..width {
+                    expected[r as usize * width + c] += values[k * width + c];
+                }
+            }
+            let out = B::float_scatter_add_rows(
+                f(&base, &[n, width]),
+                i(&rows, &[m]),
+                f(&values, &[m, width]),
+            )
+            .unwrap();
+            assert_eq!(B::float_to_vec(&out), expected);
+        }
+
+        let nd = B::float_scatter_add_nd(
+            B::float_zeros(&[2, 3], &D),
+            i(&[1, 2, 0, 0, 1, 2], &[3, 2]),
+            f(&[1.0, 2.0, 3.0], &[3]),
+        )
+        .unwrap();
+        assert_eq!(B::float_to_vec(&nd), vec![2.0, 0.0, 0.0, 0.0, 0.0, 4.0]);
+    }
+
+    #[test]
+    fn gathers_pick_rows() {
+        let t = f(&seq(6), &[3, 2]);
+        let out = B::float_gather_rows(t.clone(), i(&[2, 2, 0], &[3])).unwrap();
+        assert_eq!(B::float_to_vec(&out), vec![4.0, 5.0, 4.0, 5.0, 0.0, 1.0]);
+        let nd = B::float_gather_nd(t, i(&[2, 1, 0, 0], &[2, 2])).unwrap();
+        assert_eq!(B::float_to_vec(&nd), vec![5.0, 0.0]);
+        let big = f(&seq(1000 * 64), &[1000, 64]);
+        let rows: Vec<i64> = (0..2000).map(|k| (k * 31) % 1000).collect();
+        let out = B::float_to_vec(&B::float_gather_rows(big, i(&rows, &[2000])).unwrap());
+        let expected: Vec<f32> = rows
+            .iter()
+            .flat_map(|&r| (0..64).map(move |c| (r * 64 + c) as f32))
+            .collect();
+        assert_eq!(out, expected);
+    }
+
+    #[test]
+    fn bad_indices_are_errors() {
+        let t = f(&seq(6), &[3, 2]);
+        let err = B::float_gather_rows(t.clone(), i(&[0, 3], &[2])).unwrap_err();
+        assert_eq!(
+            err,
+            TensorError::IndexOutOfRange {
+                op: "gather_rows",
+                index: 3,
+                bound: 3
+            }
+        );
+        let err = B::float_scatter_add_rows(t.clone(), i(&[-1], &[1]), f(&[0.0, 0.0], &[1, 2]))
+            .unwrap_err();
+        assert_eq!(
+            err,
+            TensorError::IndexOutOfRange {
+                op: "scatter_add_rows",
+                index: -1,
+                bound: 3
+            }
+        );
+        // [0, 2] would be the valid flat row 2; the second component is checked against its axis.
+        let err = B::float_gather_nd(t.clone(), i(&[0, 2], &[1, 2])).unwrap_err();
+        assert_eq!(
+            err,
+            TensorError::IndexOutOfRange {
+                op: "gather_nd",
+                index: 2,
+                bound: 2
+            }
+        );
+        let err = B::int_gather_rows(i(&[1, 2], &[2]), i(&[5], &[1])).unwrap_err();
+        assert_eq!(
+            err,
+            TensorError::IndexOutOfRange {
+                op: "int_gather_rows",
+                index: 5,
+                bound: 2
+            }
+        );
+    }
+
+    #[test]
+    fn pad_modes() {
+        let t = f(&[1.0, 2.0, 3.0], &[3]);
+        let cases = [
+            (PadMode::Constant(9.0), vec![9.0, 9.0, 1.0, 2.0, 3.0, 9.0]),
+            (PadMode::Edge, vec![1.0, 1.0, 1.0, 2.0, 3.0, 3.0]),
+            (PadMode::Periodic, vec![2.0, 3.0, 1.0, 2.0, 3.0, 1.0]),
+            (PadMode::Symmetric, vec![2.0, 1.0, 1.0, 2.0, 3.0, 3.0]),
+        ];
+        for (mode, expected) in cases {
+            assert_eq!(
+                B::float_to_vec(&B::float_pad(t.clone(), &[(2, 1)], mode)),
+                expected,
+                "{mode:?}"
+            );
+        }
+        let grid = B::float_pad(f(&seq(4), &[2, 2]), &[(1, 0), (0, 1)], PadMode::Periodic);
+        assert_eq!(
+            B::float_to_vec(&grid),
+            vec![2.0, 3.0, 2.0, 0.0, 1.0, 0.0, 2.0, 3.0, 2.0]
+        );
+        let empty = B::float_pad(f(&[], &[0, 2]), &[(1, 1), (0, 0)], PadMode::Constant(1.0));
+        assert_eq!(B::float_to_vec(&empty), vec![1.0; 4]);
+    }
+
+    #[test]
+    fn reductions_and_empty_tensors() {
+        let t = f(&seq(6), &[2, 3]);
+        assert_eq!(
+            B::float_to_vec(&B::float_reduce_axis(ReduceOp::Sum, t.clone(), 0)),
+            vec![3.0, 5.0, 7.0]
+        );
+        assert_eq!(
+            B::float_to_vec(&B::float_reduce_axis(ReduceOp::Max, t.clone(), 1)),
+            vec![2.0, 5.0]
+        );
+        let p = B::float_permute(t, &[1, 0]);
+        assert_eq!(
+            B::float_to_vec(&B::float_reduce_axis(ReduceOp::Min, p, 1)),
+            vec![0.0, 1.0, 2.0]
+        );
+        let e = f(&[], &[0, 3]);
+        assert_eq!(
+            B::float_to_vec(&B::float_reduce(ReduceOp::Sum, e.clone())),
+            vec![0.0]
+        );
+        assert!(B::float_to_vec(&B::float_reduce(ReduceOp::Mean, e.clone()))[0].is_nan());
+        assert_eq!(
+            B::float_to_vec(&B::float_reduce_axis(ReduceOp::Sum, e.clone(), 0)),
+            vec![0.0; 3]
+        );
+        assert_eq!(
+            B::float_shape(&B::float_reduce_axis(ReduceOp::Sum, e, 1)),
+            vec![0, 1]
+        );
+        // Parallel paths: many rows, and few rows with long columns.
+        let big: Vec<f32> = (0..64 * 1024).map(|k| (k % 7) as f32).collect();
+        let rows = B::float_reduce_axis(ReduceOp::Sum, f(&big, &[1024, 64]), 1);
+        let expected: Vec<f32> = big.chunks(64).map(|c| c.iter().sum()).collect();
+        assert_eq!(B::float_to_vec(&rows), expected);
+        let cols = B::float_reduce_axis(ReduceOp::Max, f(&big, &[2, 512, 64]), 1);
+        let big = &big;
+        let expected: Vec<f32> = (0..2)
+            .flat_map(|a| {
+                (0..64).map(move |c| {
+                    (0..512)
+                        .map(|k| big[a * 512 * 64 + k * 64 + c])
+                        .fold(0.0, f32::max)
+                })
+            })
+            .collect();
+        assert_eq!(B::float_to_vec(&cols), expected);
+    }
+
+    #[test]
+    fn integer_division_follows_python() {
+        let a = [-7, 7, -7, 7, 0, -6, 6];
+        let b = [2, -2, -2, 2, 3, 3, -3];
+        for op in [IntBinaryOp::FloorDiv, IntBinaryOp::Rem] {
+            let out = B::int_to_vec(&B::int_binary(op, i(&a, &[7]), i(&b, &[7])));
+            let expected: Vec<i64> = a.iter().zip(&b).map(|(&x, &y)| op.apply(x, y)).collect();
+            assert_eq!(out, expected, "{op:?}");
+        }
+        assert_eq!(
+            B::int_to_vec(&B::float_to_int(f(&[-1.7, 1.7, -0.2], &[3]))),
+            vec![-1, 1, 0]
+        );
+        let mean = B::int_reduce_axis(ReduceOp::Mean, i(&[-3, 0, 2, 5], &[2, 2]), 1);
+        assert_eq!(B::int_to_vec(&mean), vec![-1, 3]);
+    }
+
+    #[test]
+    fn matmul_batched_and_parallel() {
+        let a = f(&seq(12), &[2, 2, 3]);
+        let b = f(&seq(12), &[2, 3, 2]);
+        let out = B::float_matmul(a, b);
+        assert_eq!(
+            B::float_to_vec(&out),
+            vec![10.0, 13.0, 28.0, 40.0, 172.0, 193.0, 244.0, 274.0]
+        );
+        // A transposed right operand and a product large enough to be split.
+        let (m, k, n) = (300, 40, 50);
+        let a: Vec<f32> = (0..m * k).map(|x| (x % 11) as f32 - 5.0).collect();
+        let bt: Vec<f32> = (0..n * k).map(|x| (x % 7) as f32 - 3.0).collect();
+        let b = B::float_permute(f(&bt, &[n, k]), &[1, 0]);
+        let out = B::float_to_vec(&B::float_matmul(f(&a, &[m, k]), b));
+        for (r, c) in [(0, 0), (123, 17), (m - 1, n - 1)] {
+            let expected: f32 = (0..k).map(|j| a[r * k + j] * bt[c * k + j]).sum();
+            assert_eq!(out[r * n + c], expected);
+        }
+        let empty = B::float_matmul(f(&[], &[2, 0]), f(&[], &[0, 3]));
+        assert_eq!(B::float_to_vec(&empty), vec![0.0; 6]);
+    }
+}
