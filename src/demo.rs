@@ -75,7 +75,9 @@ pub fn inverse_ballistics<B: AutodiffBackend>(device: &B::Device) -> Result<Ball
     let gravity = Tensor::<B>::from_slice(&GRAVITY, &[2], device)?;
     let target = Tensor::<B>::from_slice(&TARGET, &[2], device)?;
     let mut velocity = Tensor::<B>::zeros(&[2], device);
-    let learning_rate = 0.5;
+    // The loss is quadratic with Hessian 2 (N dt)² I = 2 I: 0.5 would be a Newton step; 0.1 shows
+    // a real descent, the miss shrinking by 0.8 per iteration.
+    let learning_rate = 0.1;
     let mut iterations = 0;
     let mut miss = f32::INFINITY;
     while iterations < 200 && miss > 1e-5 {
