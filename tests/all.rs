@@ -2,3 +2,6 @@
 
 #[cfg(feature = "ndarray")]
 mod conformance;
+#[cfg(feature = "ndarray")]
+mod fields;
+mod solve;

@@ -4,6 +4,8 @@
 
 pub mod backend;
 pub mod error;
+pub mod fields;
+pub mod solve;
 pub mod tensor;
 
 pub use backend::{AutodiffBackend, Backend};

@@ -21,12 +21,13 @@
 use std::fmt;
 use std::marker::PhantomData;
 use std::ops::Range;
+use std::sync::Arc;
 
 use burn_autodiff::Autodiff;
 use burn_autodiff::checkpoint::base::Checkpointer;
 use burn_autodiff::checkpoint::strategy::NoCheckpointing;
 use burn_autodiff::grads::Gradients;
-use burn_autodiff::ops::{Backward, Ops, OpsKind};
+use burn_autodiff::ops::{Backward, Ops, OpsKind, unary};
 use burn_backend::ops::{ActivationOps, FloatTensorOps};
 use burn_backend::tensor::IndexingUpdateOp;
 use burn_backend::{
@@ -37,6 +38,7 @@ use burn_flex::Flex;
 
 use super::{AutodiffBackend, Backend, BinaryOp, CompareOp, IntBinaryOp, ReduceOp, UnaryOp};
 use crate::error::{Result, TensorError};
+use crate::solve::{SolveError, SolveOptions, SolveStats, SparseMatrix};
 
 /// The autodiff backend phi drives.
 type Ad<I> = Autodiff<I>;
@@ -320,6 +322,51 @@ impl<B: burn_backend::Backend> Backward<B, 1> for TrackingProbe {
     type State = ();
 
     fn backward(self, _ops: Ops<(), 1>, _grads: &mut Gradients, _checkpointer: &mut Checkpointer) {}
+}
+
+/// The backward step of [`Backend::float_linear_solve`]: `x = A⁻¹ b`, so `∂L/∂b = A⁻ᵀ ∂L/∂x`,
+/// one adjoint solve on the host (implicit differentiation; the forward iterations are not
+/// unrolled). The matrix is a constant and gets no gradient.
+#[derive(Debug)]
+struct LinearSolveBackward;
+
+/// What the adjoint solve needs: the matrix (shared, with its cached factorizations) and the
+/// forward's options.
+#[derive(Debug, Clone)]
+struct LinearSolveState {
+    matrix: Arc<SparseMatrix>,
+    options: SolveOptions,
+    columns: usize,
+}
+
+impl<I: BurnInner> Backward<I, 1> for LinearSolveBackward {
+    type State = LinearSolveState;
+
+    fn backward(
+        self,
+        ops: Ops<Self::State, 1>,
+        grads: &mut Gradients,
+        _checkpointer: &mut Checkpointer,
+    ) {
+        let state = ops.state;
+        unary::<I, _>(ops.parents, ops.node, grads, |grad| {
+            let shape = grad.shape().to_vec();
+            let device = grad.device();
+            let values = read(I::float_into_data(grad))
+                .try_into_vec_as::<f32>()
+                .expect("burn: float data converts to f32");
+            // Burn's backward pass cannot return an error: if even the direct fallback of the
+            // adjoint solve fails, the gradient is NaN — loud, never a plausible wrong value.
+            let adjoint = crate::solve::adjoint_solve_f32(
+                &state.matrix,
+                &values,
+                state.columns,
+                &state.options,
+            )
+            .unwrap_or_else(|_| vec![f32::NAN; values.len()]);
+            I::float_from_data(TensorData::new(adjoint, shape), &device)
+        });
+    }
 }
 
 // ------------------------------------------------------------------------------------ Backend
@@ -763,6 +810,37 @@ impl<I: BurnInner> Backend for Burn<I> {
         }
         check_indices::<I>(&indices, dims[0], "int_gather_rows")?;
         Ok(I::int_select(tensor, 0, indices))
+    }
+
+    /// Solved on the host; differentiable in `rhs` through [`LinearSolveBackward`], a custom
+    /// Burn backward step whose backward is one adjoint solve.
+    fn float_linear_solve(
+        matrix: Arc<SparseMatrix>,
+        rhs: Self::Float,
+        options: &SolveOptions,
+    ) -> std::result::Result<(Self::Float, SolveStats), SolveError> {
+        let shape = rhs.shape().to_vec();
+        let columns = shape.get(1).copied().unwrap_or(1);
+        let device = rhs.device();
+        let values = Self::float_to_vec(&rhs);
+        let (x, stats) = crate::solve::solve_f32(&matrix, &values, columns, options)?;
+        let out = I::float_from_data(TensorData::new(x, shape), &device);
+        let prep = <LinearSolveBackward as Backward<I, 1>>::prepare::<NoCheckpointing>(
+            LinearSolveBackward,
+            [rhs.node()],
+        );
+        let out = match prep.compute_bound().stateful() {
+            OpsKind::Tracked(prep) => prep.finish(
+                LinearSolveState {
+                    matrix,
+                    options: *options,
+                    columns,
+                },
+                out,
+            ),
+            OpsKind::UnTracked(prep) => prep.finish(out),
+        };
+        Ok((out, stats))
     }
 }
 

@@ -28,11 +28,13 @@
 
 use std::fmt::Debug;
 use std::ops::Range;
+use std::sync::Arc;
 
 use rand::SeedableRng;
 use rand_distr::Distribution;
 
 use crate::error::{Result, TensorError};
+use crate::solve::{SolveError, SolveOptions, SolveStats, SparseMatrix};
 
 #[cfg(feature = "burn")]
 pub mod burn;
@@ -603,6 +605,37 @@ pub trait Backend: Copy + Clone + Debug + Default + Send + Sync + 'static {
     /// # Errors
     /// [`TensorError::IndexOutOfRange`] for an index outside `0..n`.
     fn int_gather_rows(tensor: Self::Int, indices: Self::Int) -> Result<Self::Int>;
+
+    // ---------------------------------------------------------------- sparse linear solves
+
+    /// The solution `x` of `matrix · x = rhs` and what the solve did. `rhs` is `[n]` or `[n, k]`
+    /// (`k` right-hand sides, one per column) with `n = matrix.nrows()` of a square matrix; `x`
+    /// has the shape and device of `rhs`. The matrix is a host-side constant (`f64`); the solve
+    /// follows `options` (see [`crate::solve`]).
+    ///
+    /// Differentiable in `rhs` on the autodiff backends, implicitly: the backward pass is one
+    /// adjoint solve `Aᵀ y = ∂L/∂x`, giving `∂L/∂rhs = y`, never a differentiation through the
+    /// iterations. The default copies `rhs` to the host, solves natively and copies the result
+    /// back; it is not differentiable (the result is a fresh, untracked tensor), which is right
+    /// for backends without autodiff and must be overridden by those with it.
+    ///
+    /// # Errors
+    /// [`SolveError::NotConverged`] when the tolerance is not reached, [`SolveError::NonFinite`]
+    /// for NaN or infinity in `rhs`, and the other [`SolveError`]s of [`crate::solve::solve`].
+    fn float_linear_solve(
+        matrix: Arc<SparseMatrix>,
+        rhs: Self::Float,
+        options: &SolveOptions,
+    ) -> std::result::Result<(Self::Float, SolveStats), SolveError> {
+        let shape = Self::float_shape(&rhs);
+        let columns = shape.get(1).copied().unwrap_or(1);
+        let data = Self::float_to_vec(&rhs);
+        let (x, stats) = crate::solve::solve_f32(&matrix, &data, columns, options)?;
+        Ok((
+            Self::float_from_vec(x, &shape, &Self::float_device(&rhs)),
+            stats,
+        ))
+    }
 }
 
 /// A backend that records operations and computes gradients by reverse-mode differentiation.

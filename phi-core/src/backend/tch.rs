@@ -10,8 +10,10 @@
 //! Floats are always `Kind::Float` and integers `Kind::Int64`: operations whose libtorch result
 //! has another kind (comparisons give `Bool`) are cast back.
 
+use std::ffi::{c_char, c_void};
 use std::fmt;
 use std::ops::Range;
+use std::sync::{Arc, Mutex};
 
 use tch::{Device, Kind, TchError, Tensor};
 
@@ -19,6 +21,7 @@ use super::{
     AutodiffBackend, Backend, BinaryOp, CompareOp, IntBinaryOp, PadMode, ReduceOp, UnaryOp,
 };
 use crate::error::{Result, TensorError};
+use crate::solve::{SolveError, SolveOptions, SolveStats, SparseMatrix};
 
 /// The libtorch backend. Tensors live on a [`tch::Device`]; the default is the CPU.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -630,6 +633,196 @@ impl Backend for Tch {
             .f_index_select(0, &indices.0)
             .map_err(backend_error)?;
         Ok(int(rows))
+    }
+
+    /// Solved on the host. A right-hand side that requires a gradient goes through the C++
+    /// autograd `Function` of `src/solve/tch_shim.cpp`, whose backward is one adjoint solve;
+    /// others skip the shim.
+    fn float_linear_solve(
+        matrix: Arc<SparseMatrix>,
+        rhs: TchTensor,
+        options: &SolveOptions,
+    ) -> std::result::Result<(TchTensor, SolveStats), SolveError> {
+        let shape = shape_of(&rhs.0);
+        let columns = shape.get(1).copied().unwrap_or(1);
+        if rhs.0.requires_grad() && rhs.0.numel() > 0 {
+            return tracked_linear_solve(matrix, &rhs, options, columns);
+        }
+        let values = Self::float_to_vec(&rhs);
+        let (x, stats) = crate::solve::solve_f32(&matrix, &values, columns, options)?;
+        Ok((Self::float_from_vec(x, &shape, &rhs.0.device()), stats))
+    }
+}
+
+// ------------------------------------------------------------------------------------ linear solve
+
+/// The C++ shim (`src/solve/tch_shim.cpp`, compiled by the build script): a libtorch autograd
+/// `Function` whose forward and backward call [`shim_solve`] for the host-side solves.
+mod shim {
+    use std::ffi::{c_char, c_void};
+
+    /// Solves `(transpose ? Aᵀ : A) X = B` for `len` values; `0` on success.
+    pub(super) type SolveCallback = extern "C" fn(
+        context: *mut c_void,
+        rhs: *const f32,
+        out: *mut f32,
+        len: i64,
+        transpose: i32,
+        error: *mut c_char,
+        error_len: usize,
+    ) -> i32;
+    /// Releases a context.
+    pub(super) type DropCallback = extern "C" fn(context: *mut c_void);
+
+    unsafe extern "C" {
+        /// `x = LinearSolve::apply(rhs, context)`: on success returns `0` and stores a new
+        /// tensor handle (owned by the caller) in `out`; otherwise a message in `error`. Takes
+        /// ownership of `context` in every case (`drop` runs exactly once, possibly later, when
+        /// the autograd graph holding it is freed).
+        pub(super) fn phi_tch_linear_solve(
+            rhs: *const torch_sys::C_tensor,
+            context: *mut c_void,
+            solve: SolveCallback,
+            drop: DropCallback,
+            out: *mut *mut torch_sys::C_tensor,
+            error: *mut c_char,
+            error_len: usize,
+        ) -> i32;
+    }
+}
+
+/// What the shim's callbacks need: the matrix, the options, and where the forward solve leaves
+/// its outcome for [`Tch::float_linear_solve`] to pick up.
+struct ShimContext {
+    matrix: Arc<SparseMatrix>,
+    options: SolveOptions,
+    columns: usize,
+    forward: Mutex<Option<std::result::Result<SolveStats, SolveError>>>,
+}
+
+fn write_message(error: *mut c_char, error_len: usize, message: &str) {
+    if error.is_null() || error_len == 0 {
+        return;
+    }
+    let bytes = message.as_bytes();
+    let n = bytes.len().min(error_len - 1);
+    // SAFETY: the shim passes a writable buffer of `error_len` bytes.
+    unsafe {
+        std::ptr::copy_nonoverlapping(bytes.as_ptr(), error.cast::<u8>(), n);
+        *error.add(n) = 0;
+    }
+}
+
+extern "C" fn shim_solve(
+    context: *mut c_void,
+    rhs: *const f32,
+    out: *mut f32,
+    len: i64,
+    transpose: i32,
+    error: *mut c_char,
+    error_len: usize,
+) -> i32 {
+    let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        // SAFETY: `context` comes from `Arc::into_raw` in `float_linear_solve` and stays alive
+        // until the shim calls `shim_drop`, which it does only after its last solve.
+        let context = unsafe { &*context.cast::<ShimContext>() };
+        let len = usize::try_from(len).unwrap_or(0);
+        let rhs: &[f32] = if len == 0 {
+            &[]
+        } else {
+            // SAFETY: the shim passes contiguous CPU buffers of `len` floats.
+            unsafe { std::slice::from_raw_parts(rhs, len) }
+        };
+        let solution = if transpose == 0 {
+            let result =
+                crate::solve::solve_f32(&context.matrix, rhs, context.columns, &context.options);
+            let (x, reply) = match result {
+                Ok((x, stats)) => (Ok(x), Ok(stats)),
+                Err(err) => (Err(err.clone()), Err(err)),
+            };
+            *context.forward.lock().unwrap_or_else(|e| e.into_inner()) = Some(reply);
+            x
+        } else {
+            crate::solve::adjoint_solve_f32(&context.matrix, rhs, context.columns, &context.options)
+        };
+        solution.map(|x| {
+            if len > 0 {
+                // SAFETY: `out` holds `len` floats, as many as the solution.
+                unsafe { std::ptr::copy_nonoverlapping(x.as_ptr(), out, len) };
+            }
+        })
+    }));
+    match outcome {
+        Ok(Ok(())) => 0,
+        Ok(Err(err)) => {
+            write_message(error, error_len, &err.to_string());
+            1
+        }
+        Err(_) => {
+            write_message(error, error_len, "the solve panicked");
+            1
+        }
+    }
+}
+
+extern "C" fn shim_drop(context: *mut c_void) {
+    // SAFETY: `context` is the pointer from `Arc::into_raw`, released exactly once by the shim.
+    drop(unsafe { Arc::from_raw(context.cast::<ShimContext>().cast_const()) });
+}
+
+/// The forward solve through the shim: a tensor whose `grad_fn` is the C++ `LinearSolve` node.
+fn tracked_linear_solve(
+    matrix: Arc<SparseMatrix>,
+    rhs: &TchTensor,
+    options: &SolveOptions,
+    columns: usize,
+) -> std::result::Result<(TchTensor, SolveStats), SolveError> {
+    let context = Arc::new(ShimContext {
+        matrix,
+        options: *options,
+        columns,
+        forward: Mutex::new(None),
+    });
+    let raw = Arc::into_raw(context.clone()).cast_mut().cast::<c_void>();
+    let mut out: *mut torch_sys::C_tensor = std::ptr::null_mut();
+    let mut error = vec![0u8; 1024];
+    // SAFETY: `rhs` is a live tensor handle; the shim takes over `raw` (see `phi_tch_linear_solve`).
+    let status = unsafe {
+        shim::phi_tch_linear_solve(
+            rhs.0.as_ptr(),
+            raw,
+            shim_solve,
+            shim_drop,
+            &mut out,
+            error.as_mut_ptr().cast::<c_char>(),
+            error.len(),
+        )
+    };
+    let forward = context
+        .forward
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .take();
+    if status != 0 || out.is_null() {
+        // The solve's own error is the precise one; otherwise libtorch's message.
+        if let Some(Err(err)) = forward {
+            return Err(err);
+        }
+        let end = error.iter().position(|&b| b == 0).unwrap_or(error.len());
+        return Err(SolveError::Tensor(TensorError::Backend {
+            backend: "tch",
+            message: String::from_utf8_lossy(&error[..end]).into_owned(),
+        }));
+    }
+    // SAFETY: on success `out` is a fresh heap tensor handle that we now own.
+    let x = unsafe { Tensor::from_ptr(out) };
+    match forward {
+        Some(Ok(stats)) => Ok((float(x), stats)),
+        Some(Err(err)) => Err(err),
+        None => Err(SolveError::Tensor(TensorError::Backend {
+            backend: "tch",
+            message: "linear_solve: the shim returned without solving".into(),
+        })),
     }
 }
 

@@ -29,6 +29,7 @@ pub use int::IntTensor;
 
 use crate::backend::{AutodiffBackend, Backend, BinaryOp, CompareOp, PadMode, ReduceOp, UnaryOp};
 use crate::error::{Result, TensorError};
+use crate::solve::{SolveError, SolveOptions, SolveStats, SparseMatrix};
 use shape::{broadcast_shapes, broadcasts_to, check_axis, matmul_shape, numel};
 
 /// An `f32` tensor on backend `B`.
@@ -788,6 +789,50 @@ impl<B: Backend> Tensor<B> {
     /// Rounded toward zero to integers.
     pub fn to_int(&self) -> IntTensor<B> {
         IntTensor::from_primitive(B::float_to_int(self.primitive.clone()))
+    }
+}
+
+impl<B: Backend> Tensor<B> {
+    /// The solution `x` of `matrix · x = self` for a right-hand side `self` of shape `[n]` or
+    /// `[n, k]` (`k` right-hand sides), with `n = matrix.nrows()`, and what the solve did. See
+    /// [`Backend::float_linear_solve`]: differentiable in `self` on the autodiff backends through
+    /// one adjoint solve; the matrix is a constant.
+    ///
+    /// # Errors
+    /// [`SolveError::Tensor`] wrapping [`TensorError::InvalidArgument`] for a rank other than 1
+    /// or 2, [`SolveError::DimensionMismatch`] when the matrix is not square or `n` does not fit;
+    /// otherwise those of the solve ([`SolveError::NotConverged`], [`SolveError::NonFinite`],
+    /// ...).
+    pub fn linear_solve(
+        &self,
+        matrix: &std::sync::Arc<SparseMatrix>,
+        options: &SolveOptions,
+    ) -> std::result::Result<(Self, SolveStats), SolveError> {
+        let shape = self.shape();
+        if shape.is_empty() || shape.len() > 2 {
+            return Err(TensorError::InvalidArgument {
+                op: "linear_solve",
+                shape,
+                reason: "the right-hand side must be [n] or [n, k]".into(),
+            }
+            .into());
+        }
+        if matrix.nrows() != matrix.ncols() {
+            return Err(SolveError::DimensionMismatch {
+                what: "linear_solve: columns of the (square) matrix".into(),
+                expected: matrix.nrows(),
+                got: matrix.ncols(),
+            });
+        }
+        if shape[0] != matrix.nrows() {
+            return Err(SolveError::DimensionMismatch {
+                what: format!("linear_solve: rows of the right-hand side of shape {shape:?}"),
+                expected: matrix.nrows(),
+                got: shape[0],
+            });
+        }
+        let (x, stats) = B::float_linear_solve(matrix.clone(), self.primitive.clone(), options)?;
+        Ok((Self::from_primitive(x), stats))
     }
 }
 

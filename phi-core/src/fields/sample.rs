@@ -1,0 +1,427 @@
+//! Sampling grids at points (grid → particles) and scattering particle values to grids
+//! (particles → grid), Φ_Flow's `sample`/`reduce_sample` and `PointCloud.at(grid)`.
+//!
+//! Both directions share one [`Stencil`]: for `N` points and a regular set of sample points of
+//! shape `[s₀, ..., s_{d−1}]` (cell centres or the faces of one staggered component), the flat
+//! indices of the `2^d` surrounding samples of each point and their multilinear (tent) weights.
+//! Points are first turned into continuous sample indices `(x − origin) / Δx` and **clamped to
+//! `[0, sᵢ − 1]`**: a point beyond the outermost sample takes that sample's value (constant
+//! extrapolation), and its gradient with respect to the position is zero along the clamped axis.
+//! The weights are differentiable in the positions; the indices are not (they are piecewise
+//! constant).
+
+use crate::backend::{Backend, IntBinaryOp, ReduceOp};
+use crate::error::{Result, TensorError};
+use crate::tensor::{IntTensor, Tensor};
+
+use super::domain::Domain;
+use super::grid::{CenteredGrid, StaggeredGrid};
+use super::point_cloud::PointCloud;
+
+/// How particle values are transferred to a grid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Transfer {
+    /// Each particle adds its value with multilinear (tent) weights to the `2^d` nearest samples;
+    /// each sample is the weighted mean `Σ w v / Σ w`, 0 where no particle reaches. Exact for
+    /// linear fields where the particles surround the sample.
+    Linear,
+    /// Each particle adds its value to the single nearest sample (Φ_Flow 2.1.4's scatter);
+    /// each sample is the mean of its particles, 0 where there are none. Not differentiable in
+    /// the positions.
+    NearestFace,
+}
+
+/// Where the samples of a grid lie: `origin + k Δx` for `k` in `0..shape`.
+#[derive(Debug, Clone)]
+struct SampleLattice {
+    origin: Vec<f32>,
+    spacing: Vec<f32>,
+    shape: Vec<usize>,
+}
+
+impl SampleLattice {
+    /// The cell centres (`face_axis = None`) or the faces of staggered component `axis`.
+    fn of(domain: &Domain, face_axis: Option<usize>) -> Self {
+        let dx = domain.cell_size();
+        let origin = (0..domain.dim())
+            .map(|i| {
+                let offset = if face_axis == Some(i) { 0.0 } else { 0.5 };
+                domain.lower()[i] + offset * dx[i]
+            })
+            .collect();
+        let shape = match face_axis {
+            None => domain.resolution().to_vec(),
+            Some(axis) => domain.staggered_shape(axis),
+        };
+        Self {
+            origin,
+            spacing: dx,
+            shape,
+        }
+    }
+
+    fn dim(&self) -> usize {
+        self.shape.len()
+    }
+
+    /// Row-major strides of the flattened samples.
+    fn strides(&self) -> Vec<i64> {
+        let mut strides = vec![1i64; self.dim()];
+        for axis in (0..self.dim().saturating_sub(1)).rev() {
+            strides[axis] = strides[axis + 1] * self.shape[axis + 1] as i64;
+        }
+        strides
+    }
+
+    /// Continuous sample indices `(x − origin) / Δx` of `points [N, d]`, clamped to
+    /// `[0, s − 1]` per axis: `[N, d]`.
+    fn continuous_indices<B: Backend>(&self, points: &Tensor<B>) -> Result<Tensor<B>> {
+        let device = points.device();
+        let d = self.dim();
+        let origin = Tensor::from_slice(&self.origin, &[1, d], &device)?;
+        let inv: Vec<f32> = self.spacing.iter().map(|s| 1.0 / s).collect();
+        let inv = Tensor::from_vec(inv, &[1, d], &device)?;
+        let upper: Vec<f32> = self.shape.iter().map(|&s| (s - 1) as f32).collect();
+        let upper = Tensor::from_vec(upper, &[1, d], &device)?;
+        let index = (points - &origin) * &inv;
+        index.relu().minimum(&upper)
+    }
+
+    /// Flat indices `[N]` of integer sample indices `[N, d]`.
+    fn flatten<B: Backend>(&self, index: &IntTensor<B>) -> Result<IntTensor<B>> {
+        let d = self.dim();
+        let n = index.shape()[0];
+        let strides = IntTensor::from_vec(self.strides(), &[1, d], &index.device())?;
+        let weighted = index.binary(IntBinaryOp::Mul, &strides)?;
+        weighted.reduce_axis(ReduceOp::Sum, 1)?.reshape(&[n])
+    }
+
+    /// The multilinear stencil of `points [N, d]`.
+    fn linear_stencil<B: Backend>(&self, points: &Tensor<B>) -> Result<Stencil<B>> {
+        let d = self.dim();
+        let n = points.shape()[0];
+        let device = points.device();
+        let index = self.continuous_indices(points)?;
+        // The lower corner, at most s − 2 so that the upper corner exists (0 for a single sample).
+        let highest_base: Vec<f32> = self
+            .shape
+            .iter()
+            .map(|&s| s.saturating_sub(2) as f32)
+            .collect();
+        let highest_base = Tensor::from_vec(highest_base, &[1, d], &device)?;
+        let base = index.detach().floor().minimum(&highest_base)?;
+        let fraction = &index - &base;
+        let base_flat = self.flatten(&base.to_int())?;
+        let strides = self.strides();
+        let columns = (0..d)
+            .map(|axis| fraction.narrow(1, axis..axis + 1)?.reshape(&[n]))
+            .collect::<Result<Vec<_>>>()?;
+        let corners = 1usize << d;
+        let mut indices = Vec::with_capacity(corners);
+        let mut weights = Vec::with_capacity(corners);
+        for corner in 0..corners {
+            let mut offset = 0i64;
+            let mut weight: Option<Tensor<B>> = None;
+            for axis in 0..d {
+                let upper = (corner >> (d - 1 - axis)) & 1 == 1;
+                if upper && self.shape[axis] > 1 {
+                    offset += strides[axis];
+                }
+                let factor = if upper {
+                    columns[axis].clone()
+                } else {
+                    1.0 - &columns[axis]
+                };
+                weight = Some(match weight {
+                    None => factor,
+                    Some(w) => w * factor,
+                });
+            }
+            indices.push(&base_flat + offset);
+            weights.push(weight.expect("at least one axis"));
+        }
+        Ok(Stencil {
+            indices: IntTensor::concat(&indices, 0)?,
+            weights: Tensor::stack(&weights, 0)?,
+            corners,
+            points: n,
+        })
+    }
+
+    /// The nearest-sample stencil of `points [N, d]` (weight 1).
+    fn nearest_stencil<B: Backend>(&self, points: &Tensor<B>) -> Result<Stencil<B>> {
+        let n = points.shape()[0];
+        let index = self.continuous_indices(&points.detach())?;
+        let nearest = (index + 0.5).floor();
+        let upper: Vec<f32> = self.shape.iter().map(|&s| (s - 1) as f32).collect();
+        let upper = Tensor::from_vec(upper, &[1, self.dim()], &points.device())?;
+        let nearest = nearest.minimum(&upper)?;
+        Ok(Stencil {
+            indices: self.flatten(&nearest.to_int())?,
+            weights: Tensor::ones(&[1, n], &points.device()),
+            corners: 1,
+            points: n,
+        })
+    }
+
+    fn stencil<B: Backend>(&self, points: &Tensor<B>, transfer: Transfer) -> Result<Stencil<B>> {
+        match transfer {
+            Transfer::Linear => self.linear_stencil(points),
+            Transfer::NearestFace => self.nearest_stencil(points),
+        }
+    }
+}
+
+/// For each of `points` points, `corners` samples: flat indices `[corners · points]`
+/// (corner-major) and weights `[corners, points]`.
+struct Stencil<B: Backend> {
+    indices: IntTensor<B>,
+    weights: Tensor<B>,
+    corners: usize,
+    points: usize,
+}
+
+impl<B: Backend> Stencil<B> {
+    /// `Σ_corners w · grid[index]` for a flattened grid `[samples, c]`: `[points, c]`.
+    fn gather(&self, flat: &Tensor<B>) -> Result<Tensor<B>> {
+        let c = flat.shape()[1];
+        let picked = flat
+            .gather_rows(&self.indices)?
+            .reshape(&[self.corners, self.points, c])?;
+        let weights = self.weights.reshape(&[self.corners, self.points, 1])?;
+        (picked * weights).sum_axis(0)
+    }
+
+    /// `(Σ w v, Σ w)` scattered onto `samples` flat samples, for values `[points, c]`:
+    /// `([samples, c], [samples, 1])`.
+    fn scatter(&self, values: &Tensor<B>, samples: usize) -> Result<(Tensor<B>, Tensor<B>)> {
+        let c = values.shape()[1];
+        let device = values.device();
+        let weights = self.weights.reshape(&[self.corners, self.points, 1])?;
+        let weighted =
+            (values.unsqueeze(0)? * &weights).reshape(&[self.corners * self.points, c])?;
+        let sums =
+            Tensor::zeros(&[samples, c], &device).scatter_add_rows(&self.indices, &weighted)?;
+        let weights = if self.corners == 1 {
+            Tensor::ones(&[self.points, 1], &device)
+        } else {
+            weights.reshape(&[self.corners * self.points, 1])?
+        };
+        let weight_sums =
+            Tensor::zeros(&[samples, 1], &device).scatter_add_rows(&self.indices, &weights)?;
+        Ok((sums, weight_sums))
+    }
+}
+
+/// `sums / weights` where `weights > 0`, 0 elsewhere, with a denominator that is never zero (so
+/// gradients stay finite).
+fn normalise<B: Backend>(sums: &Tensor<B>, weights: &Tensor<B>) -> Tensor<B> {
+    let empty = weights.compare_scalar(crate::backend::CompareOp::LessEqual, 0.0);
+    sums / (weights + empty)
+}
+
+fn check_points<B: Backend>(op: &'static str, domain: &Domain, points: &Tensor<B>) -> Result<()> {
+    let shape = points.shape();
+    if shape.len() != 2 || shape[1] != domain.dim() {
+        return Err(TensorError::InvalidArgument {
+            op,
+            shape,
+            reason: format!(
+                "points must be [N, {}] for a {}-d domain",
+                domain.dim(),
+                domain.dim()
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// One staggered component (or any tensor laid out on the faces of `axis`) sampled at
+/// `points [N, d]` by multilinear interpolation of its face samples: `[N]`.
+///
+/// # Errors
+/// [`TensorError::InvalidArgument`] when `points` is not `[N, d]` or the component is not of
+/// shape `domain.staggered_shape(axis)`.
+pub fn sample_face_component<B: Backend>(
+    component: &Tensor<B>,
+    domain: &Domain,
+    axis: usize,
+    points: &Tensor<B>,
+) -> Result<Tensor<B>> {
+    check_points("sample_face_component", domain, points)?;
+    let lattice = SampleLattice::of(domain, Some(axis));
+    if component.shape() != lattice.shape {
+        return Err(TensorError::InvalidArgument {
+            op: "sample_face_component",
+            shape: component.shape(),
+            reason: format!("component {axis} must have shape {:?}", lattice.shape),
+        });
+    }
+    let n = points.shape()[0];
+    let flat = component.reshape(&[component.numel(), 1])?;
+    lattice.linear_stencil(points)?.gather(&flat)?.reshape(&[n])
+}
+
+/// A staggered vector field sampled at `points [N, d]`: component `i` of the result is
+/// component `i` of the grid interpolated multilinearly from its `2^d` surrounding faces,
+/// `u(x) = Σ_corners Πⱼ (1 − |xⱼ − x_corner,j| / Δxⱼ) u_corner`: `[N, d]`.
+///
+/// Points beyond the outermost faces are clamped (the value of the nearest boundary sample).
+/// Differentiable in the grid values and the positions.
+///
+/// # Errors
+/// [`TensorError::InvalidArgument`] when `points` is not `[N, d]`.
+pub fn sample_staggered<B: Backend>(
+    velocity: &StaggeredGrid<B>,
+    points: &Tensor<B>,
+) -> Result<Tensor<B>> {
+    let domain = velocity.domain();
+    check_points("sample_staggered", domain, points)?;
+    let columns = (0..domain.dim())
+        .map(|axis| {
+            let n = points.shape()[0];
+            sample_face_component(velocity.component(axis), domain, axis, points)?.reshape(&[n, 1])
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Tensor::concat(&columns, 1)
+}
+
+/// A centred grid `[res..., c]` sampled at `points [N, d]` by multilinear interpolation of the
+/// `2^d` surrounding cell centres: `[N, c]`. Points beyond the outermost cell centres are
+/// clamped. Differentiable in the grid values and the positions.
+///
+/// # Errors
+/// [`TensorError::InvalidArgument`] when `points` is not `[N, d]`.
+pub fn sample_centered<B: Backend>(
+    grid: &CenteredGrid<B>,
+    points: &Tensor<B>,
+) -> Result<Tensor<B>> {
+    let domain = grid.domain();
+    check_points("sample_centered", domain, points)?;
+    let lattice = SampleLattice::of(domain, None);
+    let flat = grid
+        .values()
+        .reshape(&[domain.cell_count(), grid.channels()])?;
+    lattice.linear_stencil(points)?.gather(&flat)
+}
+
+/// Particle velocities `cloud.values() [N, d]` at `cloud.positions() [N, d]` transferred to the
+/// faces of `domain`: component `i` of particle velocity goes to the faces of component `i`.
+///
+/// Returns `(velocity, weights)`: `weights` holds per face the summed transfer weights `Σ w`
+/// (tent weights for [`Transfer::Linear`], particle counts for [`Transfer::NearestFace`]), and
+/// `velocity = Σ w v / Σ w` there, 0 on faces no particle reaches. The tent weights of one
+/// particle sum to 1 per component, so `Σ weights = N` for each component. Positions beyond the
+/// outermost faces are clamped onto them. No boundary condition is applied (see
+/// [`super::apply_wall_boundaries`]). Differentiable in values and (for `Linear`) positions.
+///
+/// # Errors
+/// [`TensorError::InvalidArgument`] when the cloud's dimension differs from the domain's or the
+/// values are not `d` velocity components.
+pub fn particles_to_staggered<B: Backend>(
+    cloud: &PointCloud<B>,
+    domain: &Domain,
+    transfer: Transfer,
+) -> Result<(StaggeredGrid<B>, StaggeredGrid<B>)> {
+    let d = domain.dim();
+    check_points("particles_to_staggered", domain, cloud.positions())?;
+    if cloud.channels() != d {
+        return Err(TensorError::InvalidArgument {
+            op: "particles_to_staggered",
+            shape: cloud.values().shape(),
+            reason: format!(
+                "needs {d}-component velocities [N, {d}], got {} channels",
+                cloud.channels()
+            ),
+        });
+    }
+    let mut values = Vec::with_capacity(d);
+    let mut weights = Vec::with_capacity(d);
+    for axis in 0..d {
+        let lattice = SampleLattice::of(domain, Some(axis));
+        let samples: usize = lattice.shape.iter().product();
+        let stencil = lattice.stencil(cloud.positions(), transfer)?;
+        let column = cloud.values().narrow(1, axis..axis + 1)?;
+        let (sums, weight_sums) = stencil.scatter(&column, samples)?;
+        values.push(normalise(&sums, &weight_sums).reshape(&lattice.shape)?);
+        weights.push(weight_sums.reshape(&lattice.shape)?);
+    }
+    Ok((
+        StaggeredGrid::new(values, domain.clone())?,
+        StaggeredGrid::new(weights, domain.clone())?,
+    ))
+}
+
+/// Particle values `cloud.values() [N, c]` transferred to the cell centres of `domain`.
+///
+/// Returns `(values, weights)`, both centred grids: `weights [res..., 1]` is the summed transfer
+/// weight per cell (a smooth particle density for [`Transfer::Linear`], the particle count per
+/// nearest cell for [`Transfer::NearestFace`]) and `values [res..., c] = Σ w v / Σ w`, 0 in cells
+/// no particle reaches. Positions beyond the outermost cell centres are clamped onto them.
+///
+/// # Errors
+/// [`TensorError::InvalidArgument`] when the cloud's dimension differs from the domain's or the
+/// cloud has no channels.
+pub fn particles_to_centered<B: Backend>(
+    cloud: &PointCloud<B>,
+    domain: &Domain,
+    transfer: Transfer,
+) -> Result<(CenteredGrid<B>, CenteredGrid<B>)> {
+    check_points("particles_to_centered", domain, cloud.positions())?;
+    let c = cloud.channels();
+    if c == 0 {
+        return Err(TensorError::InvalidArgument {
+            op: "particles_to_centered",
+            shape: cloud.values().shape(),
+            reason: "the cloud carries no values; use count_particles for occupancy".into(),
+        });
+    }
+    let lattice = SampleLattice::of(domain, None);
+    let stencil = lattice.stencil(cloud.positions(), transfer)?;
+    let (sums, weight_sums) = stencil.scatter(cloud.values(), domain.cell_count())?;
+    let mut shape = domain.resolution().to_vec();
+    shape.push(c);
+    let values = normalise(&sums, &weight_sums).reshape(&shape)?;
+    *shape.last_mut().expect("a grid has axes") = 1;
+    Ok((
+        CenteredGrid::new(values, domain.clone())?,
+        CenteredGrid::new(weight_sums.reshape(&shape)?, domain.clone())?,
+    ))
+}
+
+/// The number of `points [N, d]` in each cell (the cell that contains the point; points outside
+/// the domain count in the nearest boundary cell): `[res..., 1]`. Not differentiable.
+///
+/// # Errors
+/// [`TensorError::InvalidArgument`] when `points` is not `[N, d]`.
+pub fn count_particles<B: Backend>(points: &Tensor<B>, domain: &Domain) -> Result<CenteredGrid<B>> {
+    check_points("count_particles", domain, points)?;
+    let n = points.shape()[0];
+    // The containing cell is the nearest cell centre.
+    let stencil = SampleLattice::of(domain, None).nearest_stencil(points)?;
+    let device = points.device();
+    let counts = Tensor::zeros(&[domain.cell_count(), 1], &device)
+        .scatter_add_rows(&stencil.indices, &Tensor::ones(&[n, 1], &device))?;
+    let mut shape = domain.resolution().to_vec();
+    shape.push(1);
+    CenteredGrid::new(counts.reshape(&shape)?, domain.clone())
+}
+
+/// The cells holding at least one of `points [N, d]`, as a `0/1` mask `[res..., 1]`
+/// (Φ_Flow's FLIP `occupied` mask). Not differentiable.
+///
+/// # Errors
+/// [`TensorError::InvalidArgument`] when `points` is not `[N, d]`.
+pub fn occupied_cells<B: Backend>(points: &Tensor<B>, domain: &Domain) -> Result<CenteredGrid<B>> {
+    let counts = count_particles(points, domain)?;
+    counts.with_values(counts.values().greater_scalar(0.0))
+}
+
+/// The faces whose transfer weight is positive (the `weights` of [`particles_to_staggered`]), as
+/// `0/1` masks per component: the faces that received particle data.
+///
+/// # Errors
+/// Only shape errors, which cannot happen for a valid grid.
+pub fn valid_faces<B: Backend>(weights: &StaggeredGrid<B>) -> Result<StaggeredGrid<B>> {
+    weights.map(|_, w| Ok(w.greater_scalar(0.0)))
+}

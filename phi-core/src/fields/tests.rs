@@ -1,0 +1,146 @@
+//! Unit tests of the fields layer on the ndarray backend (the cross-backend suite is in
+//! `tests/fields`).
+
+use super::*;
+use crate::backend::ndarray::NdArray;
+use crate::tensor::Tensor;
+
+type T = Tensor<NdArray>;
+
+fn device() -> <NdArray as crate::Backend>::Device {
+    Default::default()
+}
+
+fn unit(res: &[usize]) -> Domain {
+    Domain::closed_unit_cells(res).unwrap()
+}
+
+#[test]
+fn constructors_check_shapes() {
+    let domain = unit(&[3, 2]);
+    assert!(CenteredGrid::new(T::zeros(&[3, 2, 1], &device()), domain.clone()).is_ok());
+    let message = CenteredGrid::new(T::zeros(&[2, 3, 1], &device()), domain.clone())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        message.contains("[2, 3, 1]") && message.contains("[3, 2]"),
+        "{message}"
+    );
+    let good = vec![T::zeros(&[4, 2], &device()), T::zeros(&[3, 3], &device())];
+    assert!(StaggeredGrid::new(good, domain.clone()).is_ok());
+    let bad = vec![T::zeros(&[3, 2], &device()), T::zeros(&[3, 3], &device())];
+    let message = StaggeredGrid::new(bad, domain.clone())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        message.contains("[4, 2]") && message.contains("[3, 2]"),
+        "{message}"
+    );
+    let one = vec![T::zeros(&[4, 2], &device())];
+    assert!(StaggeredGrid::new(one, domain).is_err());
+    let message = PointCloud::new(T::zeros(&[5, 2], &device()), T::zeros(&[4, 2], &device()))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        message.contains("[5, 2]") && message.contains("[4, 2]"),
+        "{message}"
+    );
+    assert!(PointCloud::new(T::zeros(&[5, 4], &device()), T::zeros(&[5, 1], &device())).is_err());
+}
+
+#[test]
+fn sample_points_follow_the_layout() {
+    let domain = Domain::new(
+        &[2, 3],
+        &[1.0, -1.0],
+        &[2.0, 2.0],
+        &[[Boundary::Open; 2]; 2],
+    )
+    .unwrap();
+    let centres = cell_centers::<NdArray>(&domain, &device());
+    assert_eq!(centres.shape(), vec![2, 3, 2]);
+    // cell (1, 2): x = 1 + 1.5 · 0.5, y = −1 + 2.5 · 1
+    assert_eq!(centres.to_vec()[(3 + 2) * 2..(3 + 2) * 2 + 2], [1.75, 1.5]);
+    let faces = face_centers::<NdArray>(&domain, 0, &device());
+    assert_eq!(faces.shape(), vec![3, 3, 2]);
+    // face (2, 0) of component x: x = 1 + 2 · 0.5, y = −1 + 0.5
+    assert_eq!(faces.to_vec()[6 * 2..6 * 2 + 2], [2.0, -0.5]);
+    let faces = face_centers::<NdArray>(&domain, 1, &device());
+    assert_eq!(faces.shape(), vec![2, 4, 2]);
+    assert_eq!(faces.to_vec()[3 * 2..3 * 2 + 2], [1.25, 2.0]);
+}
+
+#[test]
+fn gradient_and_divergence_small() {
+    let domain = unit(&[3]);
+    let p = CenteredGrid::<NdArray>::new(
+        T::from_vec(vec![1.0, 4.0, 9.0], &[3, 1], &device()).unwrap(),
+        domain,
+    )
+    .unwrap();
+    let g = gradient(&p).unwrap();
+    assert_eq!(g.component(0).to_vec(), vec![0.0, 3.0, 5.0, 0.0]);
+    let div = divergence(&g).unwrap();
+    assert_eq!(div.values().to_vec(), vec![3.0, 2.0, -5.0]);
+    let open = Domain::new(&[3], &[0.0], &[3.0], &[[Boundary::Open; 2]]).unwrap();
+    let p = p.values().clone();
+    let g = gradient(&CenteredGrid::new(p, open).unwrap()).unwrap();
+    assert_eq!(g.component(0).to_vec(), vec![1.0, 3.0, 5.0, -9.0]);
+}
+
+#[test]
+fn nearest_transfer_averages_and_counts() {
+    let domain = unit(&[3, 2]);
+    let positions = T::from_vec(vec![0.2, 0.4, 0.4, 0.6, 2.9, 1.9], &[3, 2], &device()).unwrap();
+    let values = T::from_vec(vec![1.0, 10.0, 3.0, 20.0, 5.0, 30.0], &[3, 2], &device()).unwrap();
+    let cloud = PointCloud::new(positions.clone(), values).unwrap();
+    let (v, w) = particles_to_staggered(&cloud, &domain, Transfer::NearestFace).unwrap();
+    // x faces: shape [4, 2]; particles 0 and 1 → face (0, 0); particle 2 → face (3, 1).
+    assert_eq!(
+        w.component(0).to_vec(),
+        vec![2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]
+    );
+    assert_eq!(
+        v.component(0).to_vec(),
+        vec![2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 5.0]
+    );
+    // y faces: shape [3, 3]; particle 0 → (0, 0), particle 1 → (0, 1), particle 2 → (2, 2).
+    assert_eq!(
+        v.component(1).to_vec(),
+        vec![10.0, 20.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 30.0]
+    );
+    let occupied = occupied_cells(&positions, &domain).unwrap();
+    assert_eq!(
+        occupied.values().to_vec(),
+        vec![1.0, 0.0, 0.0, 0.0, 0.0, 1.0]
+    );
+    let counts = count_particles(&positions, &domain).unwrap();
+    assert_eq!(counts.values().to_vec(), vec![2.0, 0.0, 0.0, 0.0, 0.0, 1.0]);
+}
+
+#[test]
+fn extrapolation_grows_one_layer_per_iteration() {
+    let values = T::from_vec(vec![0.0, 0.0, 4.0, 0.0, 0.0, 0.0], &[6], &device()).unwrap();
+    let valid = T::from_vec(vec![0.0, 0.0, 1.0, 0.0, 0.0, 0.0], &[6], &device()).unwrap();
+    let (v, m) = extrapolate_valid_tensor(&values, &valid, 1, 2).unwrap();
+    assert_eq!(v.to_vec(), vec![4.0, 4.0, 4.0, 4.0, 4.0, 0.0]);
+    assert_eq!(m.to_vec(), vec![1.0, 1.0, 1.0, 1.0, 1.0, 0.0]);
+    // two valid neighbours are averaged
+    let values = T::from_vec(vec![2.0, 0.0, 6.0], &[3], &device()).unwrap();
+    let valid = T::from_vec(vec![1.0, 0.0, 1.0], &[3], &device()).unwrap();
+    let (v, _) = extrapolate_valid_tensor(&values, &valid, 1, 1).unwrap();
+    assert_eq!(v.to_vec(), vec![2.0, 4.0, 6.0]);
+}
+
+#[test]
+fn grids_on_different_domains_do_not_mix() {
+    let a = CenteredGrid::<NdArray>::zeros(&unit(&[4, 4]), 1, &device());
+    let b = CenteredGrid::<NdArray>::zeros(&unit(&[4, 8]), 1, &device());
+    let message = a.add(&b).unwrap_err().to_string();
+    assert!(
+        message.contains("[4, 4]") && message.contains("[4, 8]"),
+        "{message}"
+    );
+    let u = StaggeredGrid::<NdArray>::zeros(&unit(&[4, 8]), &device());
+    assert!(advect_semi_lagrangian(&a, &u, 0.1).is_err());
+}

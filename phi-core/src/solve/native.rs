@@ -1,0 +1,579 @@
+//! The native (host, `f64`) solvers: preconditioned conjugate gradients, and faer's sparse
+//! Cholesky and LU.
+
+use std::sync::Arc;
+
+use faer::linalg::solvers::Solve;
+use faer::sparse::linalg::solvers::{Llt, Lu};
+use faer::sparse::{SparseColMat, Triplet};
+use faer::{Mat, Side};
+
+use super::sparse::SparseMatrix;
+use super::{Preconditioner, SolveError, SolveMethod, SolveOptions, SolveStats};
+
+/// Above this ratio of Cholesky factor entries to matrix entries, [`SolveMethod::Auto`] prefers
+/// incomplete-Cholesky CG (see the module docs and `SolveMethod::Auto`).
+const AUTO_FILL_LIMIT: f64 = 12.0;
+
+/// A cached sparse Cholesky factorization.
+#[derive(Debug)]
+pub(crate) struct CholeskyFactor(Llt<usize, f64>);
+
+/// A cached sparse LU factorization.
+#[derive(Debug)]
+pub(crate) struct LuFactor(Lu<usize, f64>);
+
+/// A zero-fill incomplete Cholesky factor `L` (lower triangle with the diagonal, CSR).
+#[derive(Debug)]
+pub(crate) struct IncompleteCholesky {
+    row_ptr: Vec<usize>,
+    cols: Vec<usize>,
+    values: Vec<f64>,
+}
+
+/// Solves `A X = B` for `columns` right-hand sides stored row-major in `rhs` (`[n, columns]`),
+/// returning `X` in the same layout.
+///
+/// # Errors
+/// [`SolveError::DimensionMismatch`] for a matrix that is not square or a right-hand side of the
+/// wrong length; [`SolveError::NonFinite`] for NaN or infinity in `rhs` (or, after a breakdown,
+/// in the solution); [`SolveError::NotConverged`] when the residual misses the tolerance;
+/// [`SolveError::Invalid`] / [`SolveError::Factorization`] when the method does not apply.
+pub fn solve(
+    matrix: &SparseMatrix,
+    rhs: &[f64],
+    columns: usize,
+    options: &SolveOptions,
+) -> Result<(Vec<f64>, SolveStats), SolveError> {
+    solve_impl(matrix, rhs, columns, options, false)
+}
+
+/// Solves `Aᵀ X = B` (the adjoint system of a backward pass), like [`solve`]. For a symmetric
+/// matrix this is the same solve, reusing the same cached factorization.
+///
+/// # Errors
+/// As [`solve`].
+pub fn solve_transpose(
+    matrix: &SparseMatrix,
+    rhs: &[f64],
+    columns: usize,
+    options: &SolveOptions,
+) -> Result<(Vec<f64>, SolveStats), SolveError> {
+    solve_impl(matrix, rhs, columns, options, true)
+}
+
+/// [`solve`] with `f32` right-hand sides and solutions (the tensors' type); the solve runs in
+/// `f64`.
+///
+/// # Errors
+/// As [`solve`], and [`SolveError::NonFinite`] when the solution overflows `f32`.
+pub fn solve_f32(
+    matrix: &SparseMatrix,
+    rhs: &[f32],
+    columns: usize,
+    options: &SolveOptions,
+) -> Result<(Vec<f32>, SolveStats), SolveError> {
+    let rhs: Vec<f64> = rhs.iter().map(|&v| f64::from(v)).collect();
+    let (x, stats) = solve(matrix, &rhs, columns, options)?;
+    Ok((to_f32(&x)?, stats))
+}
+
+/// [`solve_transpose`] with `f32` right-hand sides and solutions.
+///
+/// # Errors
+/// As [`solve_f32`].
+pub fn solve_transpose_f32(
+    matrix: &SparseMatrix,
+    rhs: &[f32],
+    columns: usize,
+    options: &SolveOptions,
+) -> Result<(Vec<f32>, SolveStats), SolveError> {
+    let rhs: Vec<f64> = rhs.iter().map(|&v| f64::from(v)).collect();
+    let (x, stats) = solve_transpose(matrix, &rhs, columns, options)?;
+    Ok((to_f32(&x)?, stats))
+}
+
+fn to_f32(x: &[f64]) -> Result<Vec<f32>, SolveError> {
+    let out: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+    if out.iter().all(|v| v.is_finite()) {
+        Ok(out)
+    } else {
+        Err(SolveError::NonFinite {
+            what: "the solution (as f32)".into(),
+        })
+    }
+}
+
+fn solve_impl(
+    matrix: &SparseMatrix,
+    rhs: &[f64],
+    columns: usize,
+    options: &SolveOptions,
+    transpose: bool,
+) -> Result<(Vec<f64>, SolveStats), SolveError> {
+    let n = matrix.nrows();
+    if matrix.ncols() != n {
+        return Err(SolveError::DimensionMismatch {
+            what: "columns of the (square) matrix".into(),
+            expected: n,
+            got: matrix.ncols(),
+        });
+    }
+    if rhs.len() != n * columns {
+        return Err(SolveError::DimensionMismatch {
+            what: format!("right-hand side values for {columns} column(s)"),
+            expected: n * columns,
+            got: rhs.len(),
+        });
+    }
+    if let Some(k) = rhs.iter().position(|v| !v.is_finite()) {
+        return Err(SolveError::NonFinite {
+            what: format!("the right-hand side (value {k} is {})", rhs[k]),
+        });
+    }
+    if !(options.relative_tolerance >= 0.0 && options.absolute_tolerance >= 0.0) {
+        return Err(SolveError::Invalid {
+            reason: format!(
+                "tolerances must be non-negative (relative {}, absolute {})",
+                options.relative_tolerance, options.absolute_tolerance
+            ),
+        });
+    }
+    if n == 0 {
+        return Ok((Vec::new(), SolveStats::default()));
+    }
+    let symmetric = matrix.is_symmetric();
+    // The system actually solved: for a transposed solve of a non-symmetric matrix, Aᵀ.
+    let transposed;
+    let system: &SparseMatrix = if transpose && !symmetric {
+        transposed = matrix.transpose();
+        &transposed
+    } else {
+        matrix
+    };
+    let method = resolve_method(matrix, options.method);
+    if matches!(
+        method,
+        SolveMethod::Cholesky | SolveMethod::ConjugateGradient(_)
+    ) && !symmetric
+    {
+        return Err(SolveError::Invalid {
+            reason: format!("{method:?} needs a symmetric matrix; use SolveMethod::Lu"),
+        });
+    }
+    matrix.count_solves(columns);
+
+    let mut solution = vec![0.0; n * columns];
+    let mut stats = SolveStats::default();
+    let mut column = vec![0.0; n];
+    for c in 0..columns {
+        for i in 0..n {
+            column[i] = rhs[i * columns + c];
+        }
+        let (x, iterations) = match method {
+            SolveMethod::ConjugateGradient(pre) => pcg(system, matrix, &column, options, pre)?,
+            SolveMethod::Cholesky => (cholesky(matrix)?.solve(&column), 0),
+            SolveMethod::Lu => (lu(matrix)?.solve(&column, transpose), 0),
+            SolveMethod::Auto => unreachable!("resolved above"),
+        };
+        let residual = residual_norm(system, &x, &column);
+        if !residual.is_finite() || x.iter().any(|v| !v.is_finite()) {
+            return Err(SolveError::NonFinite {
+                what: "the solution".into(),
+            });
+        }
+        let tolerance = threshold(options, norm(&column));
+        if residual > tolerance {
+            return Err(SolveError::NotConverged {
+                iterations,
+                residual,
+                tolerance,
+            });
+        }
+        stats.iterations = stats.iterations.max(iterations);
+        stats.residual = stats.residual.max(residual);
+        for i in 0..n {
+            solution[i * columns + c] = x[i];
+        }
+    }
+    Ok((solution, stats))
+}
+
+/// The concrete method for `requested` on `matrix`.
+fn resolve_method(matrix: &SparseMatrix, requested: SolveMethod) -> SolveMethod {
+    if requested != SolveMethod::Auto {
+        return requested;
+    }
+    if !matrix.is_symmetric() {
+        return SolveMethod::Lu;
+    }
+    let fill = *matrix.cholesky_fill.get_or_init(|| {
+        let entries = lower_triplets(matrix, true);
+        let a = SparseColMat::<usize, f64>::try_new_from_triplets(
+            matrix.nrows(),
+            matrix.ncols(),
+            &entries,
+        )
+        .ok()?;
+        faer::sparse::linalg::cholesky::factorize_symbolic_cholesky(
+            a.symbolic(),
+            Side::Lower,
+            Default::default(),
+            Default::default(),
+        )
+        .ok()
+        .map(|symbolic| symbolic.len_val())
+    });
+    match fill {
+        Some(fill) if (fill as f64) <= AUTO_FILL_LIMIT * matrix.nnz().max(1) as f64 => {
+            SolveMethod::Cholesky
+        }
+        _ => SolveMethod::ConjugateGradient(Preconditioner::IncompleteCholesky),
+    }
+}
+
+fn threshold(options: &SolveOptions, rhs_norm: f64) -> f64 {
+    (options.relative_tolerance * rhs_norm).max(options.absolute_tolerance)
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+fn norm(a: &[f64]) -> f64 {
+    dot(a, a).sqrt()
+}
+
+fn residual_norm(matrix: &SparseMatrix, x: &[f64], b: &[f64]) -> f64 {
+    let ax = matrix.mul_vec(x);
+    ax.iter()
+        .zip(b)
+        .map(|(y, b)| (b - y) * (b - y))
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// The lower triangle (with the diagonal) of a symmetric matrix as faer triplets, or every entry.
+fn lower_triplets(matrix: &SparseMatrix, lower_only: bool) -> Vec<Triplet<usize, usize, f64>> {
+    (0..matrix.nrows())
+        .flat_map(|i| {
+            matrix
+                .row(i)
+                .filter(move |&(j, _)| !lower_only || j <= i)
+                .map(move |(j, v)| Triplet::new(i, j, v))
+        })
+        .collect()
+}
+
+fn cholesky(matrix: &SparseMatrix) -> Result<Arc<CholeskyFactor>, SolveError> {
+    matrix
+        .cholesky
+        .get_or_init(|| {
+            matrix.count_factorization();
+            let failed = |reason: String| SolveError::Factorization {
+                method: "Cholesky",
+                reason,
+            };
+            let entries = lower_triplets(matrix, true);
+            let a = SparseColMat::<usize, f64>::try_new_from_triplets(
+                matrix.nrows(),
+                matrix.ncols(),
+                &entries,
+            )
+            .map_err(|e| failed(format!("{e:?}")))?;
+            let llt = a
+                .sp_cholesky(Side::Lower)
+                .map_err(|e| failed(format!("{e} (is the matrix positive definite?)")))?;
+            Ok(Arc::new(CholeskyFactor(llt)))
+        })
+        .clone()
+}
+
+fn lu(matrix: &SparseMatrix) -> Result<Arc<LuFactor>, SolveError> {
+    matrix
+        .lu
+        .get_or_init(|| {
+            matrix.count_factorization();
+            let failed = |reason: String| SolveError::Factorization {
+                method: "LU",
+                reason,
+            };
+            let entries = lower_triplets(matrix, false);
+            let a = SparseColMat::<usize, f64>::try_new_from_triplets(
+                matrix.nrows(),
+                matrix.ncols(),
+                &entries,
+            )
+            .map_err(|e| failed(format!("{e:?}")))?;
+            let lu = a.sp_lu().map_err(|e| failed(format!("{e:?}")))?;
+            Ok(Arc::new(LuFactor(lu)))
+        })
+        .clone()
+}
+
+impl CholeskyFactor {
+    fn solve(&self, b: &[f64]) -> Vec<f64> {
+        let mut x = Mat::<f64>::from_fn(b.len(), 1, |i, _| b[i]);
+        self.0.solve_in_place(&mut x);
+        (0..b.len()).map(|i| x[(i, 0)]).collect()
+    }
+}
+
+impl LuFactor {
+    fn solve(&self, b: &[f64], transpose: bool) -> Vec<f64> {
+        let mut x = Mat::<f64>::from_fn(b.len(), 1, |i, _| b[i]);
+        if transpose {
+            self.0.solve_transpose_in_place(&mut x);
+        } else {
+            self.0.solve_in_place(&mut x);
+        }
+        (0..b.len()).map(|i| x[(i, 0)]).collect()
+    }
+}
+
+impl IncompleteCholesky {
+    /// IC(0) of a symmetric matrix, or `None` where a pivot is not positive.
+    fn new(matrix: &SparseMatrix) -> Option<Self> {
+        let n = matrix.nrows();
+        let mut row_ptr = Vec::with_capacity(n + 1);
+        let mut cols = Vec::new();
+        let mut values = Vec::new();
+        row_ptr.push(0);
+        for i in 0..n {
+            for (j, v) in matrix.row(i).filter(|&(j, _)| j <= i) {
+                cols.push(j);
+                values.push(v);
+            }
+            row_ptr.push(cols.len());
+        }
+        // Row-oriented IC(0): L[i,k] = (A[i,k] − Σ_{j<k} L[i,j] L[k,j]) / L[k,k], L[i,i] = √(A[i,i]
+        // − Σ_{j<i} L[i,j]²), keeping only the pattern of the lower triangle of A.
+        for i in 0..n {
+            let (start, end) = (row_ptr[i], row_ptr[i + 1]);
+            for p in start..end {
+                let k = cols[p];
+                // Sparse dot product of rows i and k over columns below k.
+                let (mut a, mut b) = (start, row_ptr[k]);
+                let (a_end, b_end) = (p, row_ptr[k + 1]);
+                let mut sum = 0.0;
+                while a < a_end && b < b_end {
+                    let (ca, cb) = (cols[a], cols[b]);
+                    if ca >= k || cb >= k {
+                        break;
+                    }
+                    match ca.cmp(&cb) {
+                        std::cmp::Ordering::Less => a += 1,
+                        std::cmp::Ordering::Greater => b += 1,
+                        std::cmp::Ordering::Equal => {
+                            sum += values[a] * values[b];
+                            a += 1;
+                            b += 1;
+                        }
+                    }
+                }
+                if k == i {
+                    let pivot = values[p] - sum;
+                    if pivot <= 0.0 || !pivot.is_finite() {
+                        return None;
+                    }
+                    values[p] = pivot.sqrt();
+                } else {
+                    let diag = values[row_ptr[k + 1] - 1];
+                    values[p] = (values[p] - sum) / diag;
+                }
+            }
+            if end == start || cols[end - 1] != i {
+                return None; // no diagonal entry
+            }
+        }
+        Some(Self {
+            row_ptr,
+            cols,
+            values,
+        })
+    }
+
+    /// `z = (L Lᵀ)⁻¹ r`.
+    fn apply(&self, r: &[f64], z: &mut [f64]) {
+        let n = r.len();
+        // L y = r
+        for i in 0..n {
+            let (start, end) = (self.row_ptr[i], self.row_ptr[i + 1]);
+            let mut sum = r[i];
+            for p in start..end - 1 {
+                sum -= self.values[p] * z[self.cols[p]];
+            }
+            z[i] = sum / self.values[end - 1];
+        }
+        // Lᵀ z = y, column-oriented over the rows of L.
+        for i in (0..n).rev() {
+            let (start, end) = (self.row_ptr[i], self.row_ptr[i + 1]);
+            z[i] /= self.values[end - 1];
+            let zi = z[i];
+            for p in start..end - 1 {
+                z[self.cols[p]] -= self.values[p] * zi;
+            }
+        }
+    }
+}
+
+/// The preconditioner actually used.
+enum Precond {
+    Identity,
+    Jacobi(Vec<f64>),
+    Ic(Arc<IncompleteCholesky>),
+}
+
+impl Precond {
+    fn apply(&self, r: &[f64], z: &mut [f64]) {
+        match self {
+            Precond::Identity => z.copy_from_slice(r),
+            Precond::Jacobi(inverse) => {
+                for ((z, r), d) in z.iter_mut().zip(r).zip(inverse) {
+                    *z = r * d;
+                }
+            }
+            Precond::Ic(ic) => ic.apply(r, z),
+        }
+    }
+}
+
+fn jacobi(matrix: &SparseMatrix) -> Result<Precond, SolveError> {
+    let diagonal = matrix.diagonal();
+    if let Some(i) = diagonal.iter().position(|&d| d <= 0.0) {
+        return Err(SolveError::Invalid {
+            reason: format!(
+                "diagonal entry {i} is {}, so the matrix is not positive definite",
+                diagonal[i]
+            ),
+        });
+    }
+    Ok(Precond::Jacobi(diagonal.iter().map(|d| 1.0 / d).collect()))
+}
+
+fn preconditioner(matrix: &SparseMatrix, kind: Preconditioner) -> Result<Precond, SolveError> {
+    match kind {
+        Preconditioner::None => Ok(Precond::Identity),
+        Preconditioner::Jacobi => jacobi(matrix),
+        Preconditioner::IncompleteCholesky => {
+            let ic = matrix
+                .ic0
+                .get_or_init(|| {
+                    matrix.count_factorization();
+                    IncompleteCholesky::new(matrix).map(Arc::new)
+                })
+                .clone();
+            match ic {
+                Some(ic) => Ok(Precond::Ic(ic)),
+                None => jacobi(matrix),
+            }
+        }
+    }
+}
+
+/// Preconditioned conjugate gradients from `x = 0` on `system` (symmetric: `system` is
+/// `matrix`, whose caches hold the preconditioner). Returns the solution and the iterations.
+fn pcg(
+    system: &SparseMatrix,
+    matrix: &SparseMatrix,
+    b: &[f64],
+    options: &SolveOptions,
+    kind: Preconditioner,
+) -> Result<(Vec<f64>, usize), SolveError> {
+    let n = b.len();
+    let mut x = vec![0.0; n];
+    let tolerance = threshold(options, norm(b));
+    let mut r = b.to_vec();
+    let mut residual = norm(&r);
+    if residual <= tolerance {
+        return Ok((x, 0));
+    }
+    let precond = preconditioner(matrix, kind)?;
+    let mut z = vec![0.0; n];
+    let mut q = vec![0.0; n];
+    precond.apply(&r, &mut z);
+    let mut p = z.clone();
+    let mut rz = dot(&r, &z);
+    let mut iterations = 0;
+    while iterations < options.max_iterations {
+        iterations += 1;
+        system.mul_vec_into(&p, &mut q);
+        let pq = dot(&p, &q);
+        if !pq.is_finite() || !rz.is_finite() {
+            return Err(SolveError::NonFinite {
+                what: "the conjugate-gradient iteration".into(),
+            });
+        }
+        if pq <= 0.0 {
+            return Err(SolveError::Invalid {
+                reason: format!(
+                    "conjugate gradients broke down (pᵀAp = {pq:e}): the matrix is not \
+                     positive definite"
+                ),
+            });
+        }
+        let alpha = rz / pq;
+        for i in 0..n {
+            x[i] += alpha * p[i];
+            r[i] -= alpha * q[i];
+        }
+        residual = norm(&r);
+        if residual <= tolerance {
+            // The recursive residual drifts from the true one; confirm, else restart from it.
+            let true_residual = residual_norm(system, &x, b);
+            if true_residual <= tolerance {
+                return Ok((x, iterations));
+            }
+            system.mul_vec_into(&x, &mut q);
+            for i in 0..n {
+                r[i] = b[i] - q[i];
+            }
+            residual = true_residual;
+            precond.apply(&r, &mut z);
+            p.copy_from_slice(&z);
+            rz = dot(&r, &z);
+            continue;
+        }
+        precond.apply(&r, &mut z);
+        let rz_next = dot(&r, &z);
+        let beta = rz_next / rz;
+        rz = rz_next;
+        for i in 0..n {
+            p[i] = z[i] + beta * p[i];
+        }
+    }
+    Err(SolveError::NotConverged {
+        iterations,
+        residual,
+        tolerance,
+    })
+}
+
+/// The adjoint solve of a backward pass, `Aᵀ y = g`, for `f32` gradients: first with `options`;
+/// if that fails (an iterative method that does not converge on the adjoint right-hand side), once
+/// more with a direct method (Cholesky for a symmetric matrix, LU otherwise).
+///
+/// # Errors
+/// The direct solve's error when both fail.
+pub fn adjoint_solve_f32(
+    matrix: &SparseMatrix,
+    grad: &[f32],
+    columns: usize,
+    options: &SolveOptions,
+) -> Result<Vec<f32>, SolveError> {
+    match solve_transpose_f32(matrix, grad, columns, options) {
+        Ok((y, _)) => Ok(y),
+        Err(SolveError::NotConverged { .. } | SolveError::Invalid { .. })
+            if !matches!(options.method, SolveMethod::Cholesky | SolveMethod::Lu) =>
+        {
+            let method = if matrix.is_symmetric() {
+                SolveMethod::Cholesky
+            } else {
+                SolveMethod::Lu
+            };
+            let direct = SolveOptions { method, ..*options };
+            solve_transpose_f32(matrix, grad, columns, &direct).map(|(y, _)| y)
+        }
+        Err(err) => Err(err),
+    }
+}

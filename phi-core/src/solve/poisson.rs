@@ -1,0 +1,313 @@
+//! The masked Poisson matrix of FLIP's pressure projection (thesis eq. 2.9).
+
+use std::sync::Arc;
+
+use super::SolveError;
+use super::sparse::SparseMatrix;
+use crate::fields::{Boundary, Domain};
+
+/// A per-cell or per-face flag or weight: `bool`, `f32` or `f64`.
+///
+/// As a liquid flag, a cell is liquid when its weight exceeds `0.5`. As a face weight, the value
+/// (clamped to `[0, 1]`) is the open fraction of the face: `0` is a wall or an obstacle, `1` a
+/// fully accessible face.
+pub trait Weight: Copy {
+    /// The value as a number in `[0, 1]` (`bool`: `0` or `1`).
+    fn weight(self) -> f64;
+}
+
+impl Weight for bool {
+    fn weight(self) -> f64 {
+        if self { 1.0 } else { 0.0 }
+    }
+}
+
+impl Weight for f32 {
+    fn weight(self) -> f64 {
+        f64::from(self).clamp(0.0, 1.0)
+    }
+}
+
+impl Weight for f64 {
+    fn weight(self) -> f64 {
+        self.clamp(0.0, 1.0)
+    }
+}
+
+/// The Poisson system of one pressure solve: the matrix over the liquid cells and the maps
+/// between cells and unknowns.
+#[derive(Debug, Clone)]
+pub struct PoissonSystem {
+    /// The negative masked Laplacian over the unknowns (symmetric positive definite).
+    pub matrix: Arc<SparseMatrix>,
+    /// For each cell (row-major over the domain's resolution), its unknown, or `None` for a cell
+    /// that is not liquid.
+    pub cell_to_unknown: Vec<Option<usize>>,
+    /// For each unknown, its cell.
+    pub unknown_to_cell: Vec<usize>,
+    /// The unknowns pinned to make an otherwise singular (pure Neumann) liquid region solvable:
+    /// one per connected liquid region that touches neither air nor an open side.
+    pub pinned: Vec<usize>,
+    /// For each unknown, the connected liquid region it belongs to.
+    pub region_of: Vec<usize>,
+    /// For each region, whether it is pure Neumann (and therefore has a pinned unknown).
+    pub region_is_singular: Vec<bool>,
+}
+
+impl PoissonSystem {
+    /// Number of unknowns (liquid cells).
+    pub fn unknowns(&self) -> usize {
+        self.unknown_to_cell.len()
+    }
+
+    /// The cell index of each unknown as `i64`, for gathers and scatters of tensors
+    /// (`IntTensor::from_vec`).
+    pub fn unknown_cells_i64(&self) -> Vec<i64> {
+        self.unknown_to_cell.iter().map(|&c| c as i64).collect()
+    }
+
+    /// Per-cell values (row-major over the resolution) restricted to the unknowns.
+    ///
+    /// # Errors
+    /// [`SolveError::DimensionMismatch`] when `cells` does not hold one value per cell.
+    pub fn gather<T: Copy>(&self, cells: &[T]) -> Result<Vec<T>, SolveError> {
+        check_len("cell values", self.cell_to_unknown.len(), cells.len())?;
+        Ok(self.unknown_to_cell.iter().map(|&c| cells[c]).collect())
+    }
+
+    /// Values of the unknowns spread to all cells, `fill` in the cells that are not liquid.
+    ///
+    /// # Errors
+    /// [`SolveError::DimensionMismatch`] when `values` does not hold one value per unknown.
+    pub fn scatter<T: Copy>(&self, values: &[T], fill: T) -> Result<Vec<T>, SolveError> {
+        check_len("unknown values", self.unknowns(), values.len())?;
+        let mut cells = vec![fill; self.cell_to_unknown.len()];
+        for (&c, &v) in self.unknown_to_cell.iter().zip(values) {
+            cells[c] = v;
+        }
+        Ok(cells)
+    }
+
+    /// Subtracts, in each pure-Neumann region, the region's mean from `rhs` (one value per
+    /// unknown), making the right-hand side compatible with the singular operator. With a
+    /// compatible right-hand side the pinned system gives the exact solution that is zero at the
+    /// pinned cell; see [`poisson_matrix`].
+    ///
+    /// # Errors
+    /// [`SolveError::DimensionMismatch`] when `rhs` does not hold one value per unknown.
+    pub fn remove_singular_means(&self, rhs: &mut [f64]) -> Result<(), SolveError> {
+        check_len("right-hand side", self.unknowns(), rhs.len())?;
+        let regions = self.region_is_singular.len();
+        let mut sums = vec![0.0; regions];
+        let mut counts = vec![0usize; regions];
+        for (u, &r) in self.region_of.iter().enumerate() {
+            sums[r] += rhs[u];
+            counts[r] += 1;
+        }
+        for (u, &r) in self.region_of.iter().enumerate() {
+            if self.region_is_singular[r] {
+                rhs[u] -= sums[r] / counts[r] as f64;
+            }
+        }
+        Ok(())
+    }
+}
+
+fn check_len(what: &str, expected: usize, got: usize) -> Result<(), SolveError> {
+    if expected == got {
+        Ok(())
+    } else {
+        Err(SolveError::DimensionMismatch {
+            what: what.into(),
+            expected,
+            got,
+        })
+    }
+}
+
+/// Every face open: `face_open` for [`poisson_matrix`] on a domain without obstacles (the
+/// domain's own sides still follow its [`Boundary`] conditions).
+pub fn all_faces_open(domain: &Domain) -> Vec<Vec<bool>> {
+    (0..domain.dim())
+        .map(|axis| vec![true; domain.staggered_shape(axis).iter().product()])
+        .collect()
+}
+
+/// Row-major strides of `shape`.
+fn strides(shape: &[usize]) -> Vec<usize> {
+    let mut strides = vec![1; shape.len()];
+    for axis in (0..shape.len().saturating_sub(1)).rev() {
+        strides[axis] = strides[axis + 1] * shape[axis + 1];
+    }
+    strides
+}
+
+/// The negative masked Laplacian `A` of the pressure projection: `A p ≈ −∇²p` on the liquid
+/// cells, with `p = 0` in air.
+///
+/// - `liquid`: one flag per cell, row-major over `domain.resolution()` (a [`Weight`] above
+///   `0.5` is liquid). Only liquid cells are unknowns.
+/// - `face_open[axis]`: one weight per face of staggered component `axis`, row-major over
+///   `domain.staggered_shape(axis)`: `0` for a face that is not accessible (a wall, an
+///   obstacle), `1` for an open face, fractions in between scale the face's coefficient.
+///
+/// For every open face (weight `w`) of a liquid cell, with `h` the cell size along the face's
+/// axis, the cell's diagonal gains `w/h²`; if the neighbour is liquid, the off-diagonal entry
+/// gets `−w/h²` (a flux between two unknowns); if the neighbour is air, nothing else (the
+/// `p = 0` Dirichlet term, ghost value at the air cell's centre). A face on the domain's side
+/// leads to air when that side is [`Boundary::Open`] and is a wall (no flux) when it is
+/// [`Boundary::Closed`], whatever its weight. A face of weight 0 contributes nothing (Neumann).
+///
+/// # Singular regions
+/// A connected liquid region (connected through faces of positive weight) that touches no air
+/// and no open side is a pure Neumann problem: its block of `A` is singular (constants are in the
+/// null space). Each such region gets one *pinned* unknown (its first cell in row-major order),
+/// whose diagonal gains `max_axis 1/h²`, i.e. `A + c e_k e_kᵀ`, which is symmetric positive
+/// definite. If the right-hand side sums to zero over the region (the compatibility condition,
+/// see [`PoissonSystem::remove_singular_means`]), the solution is the exact one with `p = 0` at
+/// the pinned cell; pressure gradients, all the projection uses, do not depend on that constant.
+/// Otherwise the incompatible part ends up at the pinned cell. Pinned unknowns are listed in
+/// [`PoissonSystem::pinned`].
+///
+/// # Errors
+/// [`SolveError::DimensionMismatch`] when `liquid` or a face array has the wrong length or there
+/// is not one face array per axis.
+pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
+    domain: &Domain,
+    liquid: &[L],
+    face_open: &[F],
+) -> Result<PoissonSystem, SolveError> {
+    let resolution = domain.resolution();
+    let d = domain.dim();
+    let cells = domain.cell_count();
+    check_len("liquid flags (one per cell)", cells, liquid.len())?;
+    check_len("face arrays (one per axis)", d, face_open.len())?;
+    for (axis, faces) in face_open.iter().enumerate() {
+        let expected: usize = domain.staggered_shape(axis).iter().product();
+        check_len(
+            &format!("face weights of axis {axis}"),
+            expected,
+            faces.as_ref().len(),
+        )?;
+    }
+    let cell_strides = strides(resolution);
+    let face_strides: Vec<Vec<usize>> = (0..d)
+        .map(|axis| strides(&domain.staggered_shape(axis)))
+        .collect();
+    let coefficients: Vec<f64> = domain
+        .cell_size()
+        .iter()
+        .map(|&h| 1.0 / (f64::from(h) * f64::from(h)))
+        .collect();
+
+    let mut cell_to_unknown = vec![None; cells];
+    let mut unknown_to_cell = Vec::new();
+    for (cell, flag) in liquid.iter().enumerate() {
+        if flag.weight() > 0.5 {
+            cell_to_unknown[cell] = Some(unknown_to_cell.len());
+            unknown_to_cell.push(cell);
+        }
+    }
+    let n = unknown_to_cell.len();
+
+    let mut triplets = Vec::with_capacity(n * (2 * d + 1));
+    let mut anchored = vec![false; n];
+    // Union-find over unknowns joined by open faces.
+    let mut parent: Vec<usize> = (0..n).collect();
+    fn find(parent: &mut [usize], mut x: usize) -> usize {
+        while parent[x] != x {
+            parent[x] = parent[parent[x]];
+            x = parent[x];
+        }
+        x
+    }
+
+    let mut index = vec![0usize; d];
+    for (u, &cell) in unknown_to_cell.iter().enumerate() {
+        let mut rest = cell;
+        for axis in 0..d {
+            index[axis] = rest / cell_strides[axis];
+            rest %= cell_strides[axis];
+        }
+        let mut diagonal = 0.0;
+        for axis in 0..d {
+            let faces = face_open[axis].as_ref();
+            // The lower face of the cell along `axis` has the cell's own multi-index.
+            let lower_face: usize = (0..d).map(|a| index[a] * face_strides[axis][a]).sum();
+            for upper in [false, true] {
+                let face = if upper {
+                    lower_face + face_strides[axis][axis]
+                } else {
+                    lower_face
+                };
+                let w = faces[face].weight();
+                if w <= 0.0 {
+                    continue;
+                }
+                let coefficient = w * coefficients[axis];
+                let at_side = if upper {
+                    index[axis] + 1 == resolution[axis]
+                } else {
+                    index[axis] == 0
+                };
+                if at_side {
+                    let side = domain.boundaries()[axis][usize::from(upper)];
+                    if side == Boundary::Open {
+                        diagonal += coefficient;
+                        anchored[u] = true;
+                    }
+                    continue;
+                }
+                let neighbour = if upper {
+                    cell + cell_strides[axis]
+                } else {
+                    cell - cell_strides[axis]
+                };
+                diagonal += coefficient;
+                match cell_to_unknown[neighbour] {
+                    Some(v) => {
+                        triplets.push((u, v, -coefficient));
+                        let (a, b) = (find(&mut parent, u), find(&mut parent, v));
+                        parent[a] = b;
+                    }
+                    None => anchored[u] = true,
+                }
+            }
+        }
+        triplets.push((u, u, diagonal));
+    }
+
+    // Regions, numbered in order of their first unknown.
+    let mut region_of = vec![usize::MAX; n];
+    let mut root_region = vec![usize::MAX; n];
+    let mut region_anchored = Vec::new();
+    let mut region_first = Vec::new();
+    for u in 0..n {
+        let root = find(&mut parent, u);
+        if root_region[root] == usize::MAX {
+            root_region[root] = region_anchored.len();
+            region_anchored.push(false);
+            region_first.push(u);
+        }
+        region_of[u] = root_region[root];
+        region_anchored[region_of[u]] |= anchored[u];
+    }
+    let pin = coefficients.iter().copied().fold(0.0, f64::max);
+    let mut pinned = Vec::new();
+    for (region, &is_anchored) in region_anchored.iter().enumerate() {
+        if !is_anchored {
+            let u = region_first[region];
+            pinned.push(u);
+            triplets.push((u, u, pin));
+        }
+    }
+    let matrix = SparseMatrix::from_triplets(n, n, &triplets)?;
+    Ok(PoissonSystem {
+        matrix: Arc::new(matrix),
+        cell_to_unknown,
+        unknown_to_cell,
+        pinned,
+        region_of,
+        region_is_singular: region_anchored.iter().map(|&a| !a).collect(),
+    })
+}

@@ -1,0 +1,476 @@
+//! Tests of the host-side solvers and the Poisson assembly.
+
+use std::time::Instant;
+
+use rand::{Rng, SeedableRng};
+
+use super::*;
+use crate::fields::{Boundary, Domain};
+
+const ALL_METHODS: [SolveMethod; 6] = [
+    SolveMethod::Auto,
+    SolveMethod::Cholesky,
+    SolveMethod::Lu,
+    SolveMethod::ConjugateGradient(Preconditioner::None),
+    SolveMethod::ConjugateGradient(Preconditioner::Jacobi),
+    SolveMethod::ConjugateGradient(Preconditioner::IncompleteCholesky),
+];
+
+/// A random sparse symmetric positive definite matrix: a random symmetric pattern with a
+/// dominant diagonal.
+fn random_spd(n: usize, per_row: usize, seed: u64) -> SparseMatrix {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let mut triplets = Vec::new();
+    let mut row_sums = vec![0.0f64; n];
+    for i in 0..n {
+        for _ in 0..per_row {
+            let j = rng.random_range(0..n);
+            if j == i {
+                continue;
+            }
+            let v: f64 = rng.random_range(-1.0..1.0);
+            triplets.push((i, j, v));
+            triplets.push((j, i, v));
+            row_sums[i] += v.abs();
+            row_sums[j] += v.abs();
+        }
+    }
+    for (i, s) in row_sums.iter().enumerate() {
+        triplets.push((i, i, s + rng.random_range(0.1..1.0)));
+    }
+    SparseMatrix::from_triplets(n, n, &triplets).unwrap()
+}
+
+fn random_vec(n: usize, seed: u64) -> Vec<f64> {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    (0..n).map(|_| rng.random_range(-1.0..1.0)).collect()
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+fn residual(a: &SparseMatrix, x: &[f64], b: &[f64]) -> f64 {
+    let ax = a.mul_vec(x);
+    norm(&ax.iter().zip(b).map(|(p, q)| p - q).collect::<Vec<_>>())
+}
+
+/// The 2-d or 3-d Poisson matrix on a closed box with an open top (the upper side of the last
+/// axis), every cell liquid.
+fn box_poisson(resolution: &[usize]) -> PoissonSystem {
+    let d = resolution.len();
+    let mut boundaries = vec![[Boundary::Closed; 2]; d];
+    boundaries[d - 1][1] = Boundary::Open;
+    let lower = vec![0.0; d];
+    let upper: Vec<f32> = resolution.iter().map(|&n| n as f32).collect();
+    let domain = Domain::new(resolution, &lower, &upper, &boundaries).unwrap();
+    let liquid = vec![true; domain.cell_count()];
+    poisson_matrix(&domain, &liquid, &all_faces_open(&domain)).unwrap()
+}
+
+#[test]
+fn every_method_reaches_the_tolerance_on_random_spd_systems() {
+    for (seed, n) in [(1u64, 50usize), (2, 300), (3, 1000)] {
+        let a = random_spd(n, 4, seed);
+        assert!(a.is_symmetric());
+        let b = random_vec(n, seed + 100);
+        for method in ALL_METHODS {
+            let options = SolveOptions {
+                relative_tolerance: 1e-8,
+                ..SolveOptions::with_method(method)
+            };
+            let (x, stats) = solve(&a, &b, 1, &options).unwrap();
+            let r = residual(&a, &x, &b);
+            assert!(r <= 1e-8 * norm(&b), "{method:?} n={n}: residual {r}");
+            assert!(
+                (stats.residual - r).abs() <= 1e-12 + 1e-6 * r,
+                "{method:?}: reported residual {} against {r}",
+                stats.residual
+            );
+            if matches!(method, SolveMethod::ConjugateGradient(_)) {
+                assert!(stats.iterations > 0 && stats.iterations <= options.max_iterations);
+            }
+        }
+    }
+}
+
+#[test]
+fn several_right_hand_sides_and_transposed_solves() {
+    let n = 40;
+    let a = random_spd(n, 3, 7);
+    let b1 = random_vec(n, 8);
+    let b2 = random_vec(n, 9);
+    let both: Vec<f64> = (0..n).flat_map(|i| [b1[i], b2[i]]).collect();
+    let (x, _) = solve(&a, &both, 2, &SolveOptions::default()).unwrap();
+    let (x1, _) = solve(&a, &b1, 1, &SolveOptions::default()).unwrap();
+    let (x2, _) = solve(&a, &b2, 1, &SolveOptions::default()).unwrap();
+    for i in 0..n {
+        assert!((x[2 * i] - x1[i]).abs() < 1e-9 && (x[2 * i + 1] - x2[i]).abs() < 1e-9);
+    }
+
+    // A non-symmetric matrix: LU, and the transposed solve solves Aᵀ y = b.
+    let mut dense = vec![0.0; 9];
+    dense.copy_from_slice(&[4.0, 1.0, 0.0, 2.0, 5.0, 1.0, 0.0, 3.0, 6.0]);
+    let m = SparseMatrix::from_dense(3, 3, &dense).unwrap();
+    assert!(!m.is_symmetric());
+    let b = [1.0, 2.0, 3.0];
+    let (x, _) = solve(&m, &b, 1, &SolveOptions::default()).unwrap();
+    assert!(residual(&m, &x, &b) < 1e-12);
+    let (y, _) = solve_transpose(&m, &b, 1, &SolveOptions::default()).unwrap();
+    assert!(residual(&m.transpose(), &y, &b) < 1e-12);
+    let cg = SolveOptions::with_method(SolveMethod::ConjugateGradient(Preconditioner::Jacobi));
+    assert!(matches!(
+        solve(&m, &b, 1, &cg),
+        Err(SolveError::Invalid { .. })
+    ));
+}
+
+#[test]
+fn poisson_systems_reach_the_tolerance() {
+    for resolution in [vec![16, 16], vec![8, 8, 8]] {
+        let system = box_poisson(&resolution);
+        let a = &system.matrix;
+        let b = random_vec(a.nrows(), 11);
+        for method in ALL_METHODS {
+            let options = SolveOptions::with_method(method);
+            let (x, stats) = solve(a, &b, 1, &options).unwrap();
+            let r = residual(a, &x, &b);
+            assert!(r <= 1e-5 * norm(&b), "{method:?}: residual {r}");
+            assert!(stats.residual <= 1e-5 * norm(&b));
+        }
+    }
+}
+
+#[test]
+fn non_convergence_is_an_error() {
+    let system = box_poisson(&[32, 32]);
+    let b = random_vec(system.matrix.nrows(), 3);
+    for pre in [
+        Preconditioner::None,
+        Preconditioner::Jacobi,
+        Preconditioner::IncompleteCholesky,
+    ] {
+        let options = SolveOptions {
+            max_iterations: 2,
+            ..SolveOptions::with_method(SolveMethod::ConjugateGradient(pre))
+        };
+        match solve(&system.matrix, &b, 1, &options) {
+            Err(SolveError::NotConverged {
+                iterations,
+                residual,
+                tolerance,
+            }) => {
+                assert_eq!(iterations, 2);
+                assert!(residual > tolerance && tolerance > 0.0);
+            }
+            other => panic!("{pre:?}: expected NotConverged, got {other:?}"),
+        }
+    }
+}
+
+#[test]
+fn nan_and_bad_sizes_are_errors() {
+    let system = box_poisson(&[8, 8]);
+    let mut b = random_vec(64, 5);
+    b[17] = f64::NAN;
+    for method in ALL_METHODS {
+        assert!(matches!(
+            solve(&system.matrix, &b, 1, &SolveOptions::with_method(method)),
+            Err(SolveError::NonFinite { .. })
+        ));
+    }
+    let b32 = vec![f32::INFINITY; 64];
+    assert!(matches!(
+        solve_f32(&system.matrix, &b32, 1, &SolveOptions::default()),
+        Err(SolveError::NonFinite { .. })
+    ));
+    assert!(matches!(
+        solve(&system.matrix, &[1.0; 63], 1, &SolveOptions::default()),
+        Err(SolveError::DimensionMismatch {
+            expected: 64,
+            got: 63,
+            ..
+        })
+    ));
+    let rectangular = SparseMatrix::from_triplets(2, 3, &[(0, 0, 1.0)]).unwrap();
+    assert!(matches!(
+        solve(&rectangular, &[1.0, 1.0], 1, &SolveOptions::default()),
+        Err(SolveError::DimensionMismatch { .. })
+    ));
+    // Indefinite: Cholesky and CG refuse instead of answering.
+    let indefinite = SparseMatrix::from_dense(2, 2, &[1.0, 2.0, 2.0, 1.0]).unwrap();
+    assert!(matches!(
+        solve(
+            &indefinite,
+            &[1.0, 0.0],
+            1,
+            &SolveOptions::with_method(SolveMethod::Cholesky)
+        ),
+        Err(SolveError::Factorization { .. })
+    ));
+}
+
+#[test]
+fn masked_matrix_properties() {
+    // 6×5 domain, open top (upper side of axis 1), closed elsewhere; an air pocket and an
+    // obstacle face.
+    let domain = Domain::new(
+        &[6, 5],
+        &[0.0, 0.0],
+        &[3.0, 5.0],
+        &[[Boundary::Closed; 2], [Boundary::Closed, Boundary::Open]],
+    )
+    .unwrap();
+    let mut liquid = vec![1.0f32; 30];
+    liquid[2 * 5 + 3] = 0.0; // air at (2, 3)
+    let mut faces = all_faces_open(&domain);
+    faces[0][4 * 5 + 1] = false; // the face between (3, 1) and (4, 1)
+    let system = poisson_matrix(&domain, &liquid, &faces).unwrap();
+    let a = &system.matrix;
+    assert_eq!(system.unknowns(), 29);
+    assert_eq!(system.cell_to_unknown[2 * 5 + 3], None);
+    assert!(system.pinned.is_empty());
+    assert!(a.is_symmetric());
+    let (hx, hy) = (0.5f64, 1.0f64);
+    let (cx, cy) = (1.0 / (hx * hx), 1.0 / (hy * hy));
+    for u in 0..a.nrows() {
+        assert!(a.get(u, u) > 0.0, "diagonal {u}");
+        for (v, value) in a.row(u) {
+            if v != u {
+                assert!(value < 0.0);
+            }
+        }
+    }
+    let unknown = |i: usize, j: usize| system.cell_to_unknown[i * 5 + j].unwrap();
+    // An interior cell whose neighbours are all liquid: row sum 0, diagonal 2/hx² + 2/hy².
+    let u = unknown(1, 2);
+    assert_eq!(a.row(u).map(|(_, v)| v).sum::<f64>(), 0.0);
+    assert_eq!(a.get(u, u), 2.0 * cx + 2.0 * cy);
+    assert_eq!(a.get(u, unknown(0, 2)), -cx);
+    assert_eq!(a.get(u, unknown(1, 3)), -cy);
+    // Next to the air cell: the Dirichlet term adds to the diagonal only.
+    let u = unknown(2, 2);
+    assert_eq!(a.get(u, u), 2.0 * cx + 2.0 * cy);
+    assert_eq!(a.row(u).map(|(_, v)| v).sum::<f64>(), cy);
+    // At a closed wall: no flux through it.
+    let u = unknown(0, 2);
+    assert_eq!(a.get(u, u), cx + 2.0 * cy);
+    assert_eq!(a.row(u).map(|(_, v)| v).sum::<f64>(), 0.0);
+    // At the open top: the outside counts as air.
+    let u = unknown(0, 4);
+    assert_eq!(a.get(u, u), cx + 2.0 * cy);
+    assert_eq!(a.row(u).map(|(_, v)| v).sum::<f64>(), cy);
+    // The closed obstacle face: no coupling, no flux.
+    assert_eq!(a.get(unknown(3, 1), unknown(4, 1)), 0.0);
+    assert_eq!(a.get(unknown(3, 1), unknown(3, 1)), cx + 2.0 * cy);
+    // Positive definite: Cholesky succeeds.
+    let b = random_vec(29, 1);
+    assert!(solve(a, &b, 1, &SolveOptions::with_method(SolveMethod::Cholesky)).is_ok());
+    // Bad sizes.
+    assert!(matches!(
+        poisson_matrix(&domain, &liquid[..29], &faces),
+        Err(SolveError::DimensionMismatch { .. })
+    ));
+    assert!(matches!(
+        poisson_matrix(&domain, &liquid, &faces[..1]),
+        Err(SolveError::DimensionMismatch { .. })
+    ));
+}
+
+#[test]
+fn pure_neumann_regions_are_pinned() {
+    // A closed box full of liquid, plus a separate pocket sealed by obstacle faces and a second
+    // region next to air: the first two are singular and get one pin each.
+    let domain = Domain::closed_unit_cells(&[6, 4]).unwrap();
+    let mut liquid = vec![true; 24];
+    liquid[5 * 4 + 3] = false; // air at (5, 3)
+    let mut faces = all_faces_open(&domain);
+    // Wall off column x=0 (cells (0, *)) from the rest: faces between x=0 and x=1.
+    for j in 0..4 {
+        faces[0][4 + j] = false;
+    }
+    let system = poisson_matrix(&domain, &liquid, &faces).unwrap();
+    assert_eq!(system.pinned, vec![0]);
+    assert_eq!(system.region_is_singular.len(), 2);
+    let a = &system.matrix;
+    assert!(a.is_symmetric());
+    // Compatible right-hand side: the exact solution with p = 0 at the pinned cell.
+    let mut b = random_vec(system.unknowns(), 4);
+    system.remove_singular_means(&mut b).unwrap();
+    let (x, _) = solve(a, &b, 1, &SolveOptions::default()).unwrap();
+    assert!(x[0].abs() < 1e-12);
+    // Without the pin the same x solves the singular operator: A x = b in region 0.
+    let ax = a.mul_vec(&x);
+    let pin = a.get(0, 0) - 1.0; // the corner cell (0, 0) has one neighbour, (0, 1)
+    assert!((pin - 1.0).abs() < 1e-12);
+    for u in 0..4 {
+        let unpinned = ax[u] - if u == 0 { pin * x[0] } else { 0.0 };
+        assert!((unpinned - b[u]).abs() < 1e-8, "row {u}");
+    }
+    // Every method handles the pinned system.
+    for method in ALL_METHODS {
+        assert!(solve(a, &b, 1, &SolveOptions::with_method(method)).is_ok());
+    }
+    // An isolated liquid cell sealed on every side is pinned too.
+    let mut faces = all_faces_open(&domain);
+    faces[0][4 * 3 + 1] = false;
+    faces[0][4 * 4 + 1] = false;
+    faces[1][3 * 5 + 1] = false;
+    faces[1][3 * 5 + 2] = false;
+    let system = poisson_matrix(&domain, &[true; 24], &faces).unwrap();
+    let isolated = system.cell_to_unknown[3 * 4 + 1].unwrap();
+    assert!(system.pinned.contains(&isolated));
+    assert_eq!(system.pinned.len(), 2);
+}
+
+/// Max-norm errors of three manufactured solutions on refined grids; each converges at second
+/// order.
+#[test]
+fn manufactured_solutions_converge_at_second_order() {
+    use std::f64::consts::PI;
+    let sizes = [8usize, 16, 32, 64];
+    type Case = (&'static str, fn(usize) -> f64);
+    let cases: [Case; 3] = [
+        // Open sides: ghost air centres exactly on x, y ∈ {0, 1}; p = sin πx sin πy.
+        ("open sides (Dirichlet)", |n| {
+            let h = 1.0 / n as f64;
+            let m = n - 1;
+            let lo = (h / 2.0) as f32;
+            let hi = (1.0 - h / 2.0) as f32;
+            let domain =
+                Domain::new(&[m, m], &[lo, lo], &[hi, hi], &[[Boundary::Open; 2]; 2]).unwrap();
+            let system =
+                poisson_matrix(&domain, &vec![true; m * m], &all_faces_open(&domain)).unwrap();
+            let exact = |x: f64, y: f64| (PI * x).sin() * (PI * y).sin();
+            max_error(&domain, &system, exact, |x, y| 2.0 * PI * PI * exact(x, y))
+        }),
+        // Air columns at x = 0 and x = 1 inside the domain, closed walls at y = 0, 1:
+        // p = sin πx cos πy.
+        ("air mask + closed walls", |n| {
+            let h = 1.0 / n as f64;
+            let domain = Domain::new(
+                &[n + 1, n],
+                &[(-h / 2.0) as f32, 0.0],
+                &[(1.0 + h / 2.0) as f32, 1.0],
+                &[[Boundary::Closed; 2]; 2],
+            )
+            .unwrap();
+            let liquid: Vec<bool> = (0..(n + 1) * n).map(|c| c / n != 0 && c / n != n).collect();
+            let system = poisson_matrix(&domain, &liquid, &all_faces_open(&domain)).unwrap();
+            assert!(system.pinned.is_empty());
+            let exact = |x: f64, y: f64| (PI * x).sin() * (PI * y).cos();
+            max_error(&domain, &system, exact, |x, y| 2.0 * PI * PI * exact(x, y))
+        }),
+        // Pure Neumann, pinned: p = cos πx cos πy, compared up to the constant.
+        ("pure Neumann (pinned)", |n| {
+            let domain = Domain::new(
+                &[n, n],
+                &[0.0, 0.0],
+                &[1.0, 1.0],
+                &[[Boundary::Closed; 2]; 2],
+            )
+            .unwrap();
+            let liquid = vec![true; n * n];
+            let system = poisson_matrix(&domain, &liquid, &all_faces_open(&domain)).unwrap();
+            assert_eq!(system.pinned.len(), 1);
+            let exact = |x: f64, y: f64| (PI * x).cos() * (PI * y).cos();
+            max_error(&domain, &system, exact, |x, y| 2.0 * PI * PI * exact(x, y))
+        }),
+    ];
+    for (name, run) in cases {
+        let errors: Vec<f64> = sizes.iter().map(|&n| run(n)).collect();
+        let orders: Vec<f64> = errors.windows(2).map(|e| (e[0] / e[1]).log2()).collect();
+        let shown: Vec<String> = errors.iter().map(|e| format!("{e:.3e}")).collect();
+        println!("{name}: max errors {shown:?} at n = {sizes:?}, observed orders {orders:.3?}");
+        for &order in &orders {
+            assert!(order >= 1.8, "{name}: order {order} (errors {errors:?})");
+        }
+    }
+}
+
+/// Solves the manufactured problem (`−∇²p = f`) and returns the max-norm error over the liquid
+/// cells, both sides with their means removed in pinned (pure Neumann) systems.
+fn max_error(
+    domain: &Domain,
+    system: &PoissonSystem,
+    exact: impl Fn(f64, f64) -> f64,
+    source: impl Fn(f64, f64) -> f64,
+) -> f64 {
+    let res = domain.resolution();
+    let h = domain.cell_size();
+    let centre = |cell: usize| {
+        let (i, j) = (cell / res[1], cell % res[1]);
+        (
+            f64::from(domain.lower()[0]) + (i as f64 + 0.5) * f64::from(h[0]),
+            f64::from(domain.lower()[1]) + (j as f64 + 0.5) * f64::from(h[1]),
+        )
+    };
+    let mut b: Vec<f64> = system
+        .unknown_to_cell
+        .iter()
+        .map(|&c| {
+            let (x, y) = centre(c);
+            source(x, y)
+        })
+        .collect();
+    let mut want: Vec<f64> = system
+        .unknown_to_cell
+        .iter()
+        .map(|&c| {
+            let (x, y) = centre(c);
+            exact(x, y)
+        })
+        .collect();
+    let options = SolveOptions {
+        relative_tolerance: 1e-12,
+        ..SolveOptions::default()
+    };
+    let singular = !system.pinned.is_empty();
+    if singular {
+        system.remove_singular_means(&mut b).unwrap();
+    }
+    let (mut x, _) = solve(&system.matrix, &b, 1, &options).unwrap();
+    if singular {
+        for v in [&mut x, &mut want] {
+            let mean = v.iter().sum::<f64>() / v.len() as f64;
+            v.iter_mut().for_each(|e| *e -= mean);
+        }
+    }
+    x.iter()
+        .zip(&want)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max)
+}
+
+/// The timing behind [`SolveMethod::Auto`]: Jacobi-CG, IC(0)-CG and sparse Cholesky (factor +
+/// solve, and a second solve reusing the factor) on Poisson matrices. Run with
+/// `cargo test --release -p phi-core solve_timings -- --ignored --nocapture`.
+#[test]
+#[ignore = "timing, run by hand"]
+fn solve_timings() {
+    for resolution in [vec![32, 32], vec![64, 64], vec![128, 128], vec![64, 64, 64]] {
+        let n: usize = resolution.iter().product();
+        let b = random_vec(n, 1);
+        let mut line = format!("{resolution:?} ({n} unknowns):");
+        for method in [
+            SolveMethod::ConjugateGradient(Preconditioner::Jacobi),
+            SolveMethod::ConjugateGradient(Preconditioner::IncompleteCholesky),
+            SolveMethod::Cholesky,
+            SolveMethod::Auto,
+        ] {
+            let system = box_poisson(&resolution);
+            let options = SolveOptions::with_method(method);
+            let start = Instant::now();
+            let (_, stats) = solve(&system.matrix, &b, 1, &options).unwrap();
+            let first = start.elapsed().as_secs_f64() * 1e3;
+            let start = Instant::now();
+            solve(&system.matrix, &b, 1, &options).unwrap();
+            let second = start.elapsed().as_secs_f64() * 1e3;
+            line += &format!(
+                "  {method:?}: {first:.1} ms (again {second:.1} ms, {} it)",
+                stats.iterations
+            );
+        }
+        println!("{line}");
+    }
+}
