@@ -45,7 +45,7 @@ fn bench_backend<B: Backend>(c: &mut Criterion) {
 
 /// Makes sure lazy or asynchronous backends finish the work: reads one element back.
 fn force<B: Backend>(t: &Tensor<B>) {
-    std::hint::black_box(t.slice(&[0..1]).unwrap().to_vec());
+    std::hint::black_box(t.narrow(0, 0..1).unwrap().to_vec());
 }
 
 fn benches(c: &mut Criterion) {

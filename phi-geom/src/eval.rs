@@ -363,14 +363,15 @@ fn push_box_inward<B: Backend>(
     let device = p.device();
     let center = b.center();
     let (mut low, mut high) = (Vec::with_capacity(b.dim()), Vec::with_capacity(b.dim()));
-    for k in 0..b.dim() {
-        let (l, h) = (b.lower()[k] + offset, b.upper()[k] - offset);
+    for ((&lower, &upper), &middle) in b.lower().iter().zip(b.upper()).zip(&center) {
+        let (l, h) = (lower + offset, upper - offset);
+        // A box thinner than twice the offset shrinks to its centre line.
         if l <= h {
             low.push(l);
             high.push(h);
         } else {
-            low.push(center[k]);
-            high.push(center[k]);
+            low.push(middle);
+            high.push(middle);
         }
     }
     let clamped = p

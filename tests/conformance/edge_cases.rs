@@ -70,7 +70,7 @@ fn empty_tensors<B: Backend>() {
     let full = tensor::<B>(&[2, 3], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
     let joined = Tensor::concat(&[empty.clone(), full.clone()], 0).unwrap();
     assert_tensor("concat with empty", &joined, &[2, 3], &full.to_vec());
-    assert_eq!(full.slice(&[1..1]).unwrap().shape(), vec![0, 3]);
+    assert_eq!(full.narrow(0, 1..1).unwrap().shape(), vec![0, 3]);
     assert_eq!(
         empty
             .matmul(&Tensor::zeros(&[3, 2], &device))
@@ -179,7 +179,7 @@ fn shape_errors_name_both_shapes<B: Backend>() {
     ));
     assert!(a.reshape(&[4]).is_err());
     assert!(a.permute(&[0, 0]).is_err());
-    assert!(a.slice(&[0..4]).is_err());
+    assert!(a.narrow(0, 0..4).is_err());
     assert!(a.sum_axis(2).is_err());
     assert!(Tensor::concat(&[a.clone(), b.clone()], 0).is_err());
     assert!(Tensor::<B>::concat(&[], 0).is_err());

@@ -170,10 +170,9 @@ pub fn laplace<B: Backend>(field: &CenteredGrid<B>) -> Result<CenteredGrid<B>> {
     let f = field.values();
     let dx = domain.cell_size();
     let mut total: Option<Tensor<B>> = None;
-    for axis in 0..domain.dim() {
-        let [lo, hi] = domain.boundaries()[axis];
+    for (axis, (&[lo, hi], h)) in domain.boundaries().iter().zip(&dx).enumerate() {
         let padded = pad_ghosts(f, axis, [Ghost::scalar(lo), Ghost::scalar(hi)])?;
-        let second = diff(&diff(&padded, axis)?, axis)? * (1.0 / (dx[axis] * dx[axis]));
+        let second = diff(&diff(&padded, axis)?, axis)? * (1.0 / (h * h));
         total = Some(match total {
             None => second,
             Some(t) => t + second,
