@@ -1,7 +1,5 @@
 //! Tests of the host-side solvers and the Poisson assembly.
 
-use std::time::Instant;
-
 use rand::{Rng, SeedableRng};
 
 use super::*;
@@ -440,37 +438,4 @@ fn max_error(
         .zip(&want)
         .map(|(a, b)| (a - b).abs())
         .fold(0.0, f64::max)
-}
-
-/// The timing behind [`SolveMethod::Auto`]: Jacobi-CG, IC(0)-CG and sparse Cholesky (factor +
-/// solve, and a second solve reusing the factor) on Poisson matrices. Run with
-/// `cargo test --release -p phi-core solve_timings -- --ignored --nocapture`.
-#[test]
-#[ignore = "timing, run by hand"]
-fn solve_timings() {
-    for resolution in [vec![32, 32], vec![64, 64], vec![128, 128], vec![64, 64, 64]] {
-        let n: usize = resolution.iter().product();
-        let b = random_vec(n, 1);
-        let mut line = format!("{resolution:?} ({n} unknowns):");
-        for method in [
-            SolveMethod::ConjugateGradient(Preconditioner::Jacobi),
-            SolveMethod::ConjugateGradient(Preconditioner::IncompleteCholesky),
-            SolveMethod::Cholesky,
-            SolveMethod::Auto,
-        ] {
-            let system = box_poisson(&resolution);
-            let options = SolveOptions::with_method(method);
-            let start = Instant::now();
-            let (_, stats) = solve(&system.matrix, &b, 1, &options).unwrap();
-            let first = start.elapsed().as_secs_f64() * 1e3;
-            let start = Instant::now();
-            solve(&system.matrix, &b, 1, &options).unwrap();
-            let second = start.elapsed().as_secs_f64() * 1e3;
-            line += &format!(
-                "  {method:?}: {first:.1} ms (again {second:.1} ms, {} it)",
-                stats.iterations
-            );
-        }
-        println!("{line}");
-    }
 }
