@@ -4,4 +4,5 @@
 mod conformance;
 #[cfg(feature = "ndarray")]
 mod fields;
+#[cfg(feature = "ndarray")]
 mod solve;

@@ -46,7 +46,7 @@ fn values_of(n: usize, seed: u64) -> Vec<f32> {
 }
 
 /// Central differences of `loss` with respect to each element of each input.
-fn finite_differences<B: AutodiffBackend>(
+pub fn finite_differences<B: AutodiffBackend>(
     inputs: &[(Vec<usize>, Vec<f32>)],
     loss: impl Fn(&[Tensor<B>]) -> Tensor<B>,
 ) -> Vec<Vec<f32>> {

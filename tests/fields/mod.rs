@@ -1,9 +1,10 @@
 //! The fields layer (`phi_core::fields`) on every backend: differential operators against exact
-//! maths and convergence orders, particle ↔ grid transfers, extrapolation, advection, errors,
-//! and gradients of the transfers on the autodiff backends.
+//! maths and convergence orders, particle ↔ grid transfers, extrapolation, advection, the
+//! pressure projection, errors, and gradients on the autodiff backends.
 
 mod gradients;
 mod operators;
+mod projection;
 mod transfer;
 
 use phi_core::fields::{Boundary, Domain};

@@ -11,43 +11,22 @@ use phi_core::solve::{
 };
 use phi_core::{AutodiffBackend, Backend, Tensor, TensorError};
 
-macro_rules! for_each_backend {
-    ($($test:ident),* $(,)?) => {
-        #[cfg(feature = "ndarray")]
-        mod ndarray {
-            $(#[test] fn $test() { super::$test::<phi_core::backend::ndarray::NdArray>(); })*
-        }
-        #[cfg(feature = "burn")]
-        mod burn {
-            $(#[test] fn $test() { super::$test::<phi_core::backend::burn::Burn>(); })*
-        }
-        #[cfg(feature = "tch")]
-        mod tch {
-            $(#[test] fn $test() { super::$test::<phi_core::backend::tch::Tch>(); })*
-        }
-    };
+/// Forward solves on every backend.
+mod forward {
+    use super::*;
+    crate::conformance::for_each_backend!(forward_matches_the_host_solver, errors_are_values);
 }
 
-macro_rules! for_each_autodiff_backend {
-    ($($test:ident),* $(,)?) => {
-        #[cfg(feature = "burn")]
-        mod burn_autodiff {
-            $(#[test] fn $test() { super::$test::<phi_core::backend::burn::Burn>(); })*
-        }
-        #[cfg(feature = "tch")]
-        mod tch_autodiff {
-            $(#[test] fn $test() { super::$test::<phi_core::backend::tch::Tch>(); })*
-        }
-    };
+/// Implicit gradients on the autodiff backends.
+mod gradients {
+    use super::*;
+    crate::conformance::for_each_autodiff_backend!(
+        gradient_matches_finite_differences,
+        gradient_of_several_right_hand_sides,
+        backward_is_one_adjoint_solve,
+        tracking_follows_the_right_hand_side,
+    );
 }
-
-for_each_backend!(forward_matches_the_host_solver, errors_are_values);
-for_each_autodiff_backend!(
-    gradient_matches_finite_differences,
-    gradient_of_several_right_hand_sides,
-    backward_is_one_adjoint_solve,
-    tracking_follows_the_right_hand_side,
-);
 
 /// A 6×5 tank with an open top, an air pocket and an obstacle face: 29 unknowns.
 fn tank() -> PoissonSystem {

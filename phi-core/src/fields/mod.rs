@@ -19,6 +19,7 @@ mod extrapolate;
 mod grid;
 pub mod ops;
 mod point_cloud;
+mod projection;
 mod sample;
 
 pub use advect::{Integrator, advect_points, advect_semi_lagrangian};
@@ -30,6 +31,7 @@ pub use ops::{
     staggered_to_centered,
 };
 pub use point_cloud::PointCloud;
+pub use projection::{Projection, ProjectionMasks, pressure_projection};
 pub use sample::{
     Transfer, count_particles, occupied_cells, particles_to_centered, particles_to_staggered,
     sample_centered, sample_face_component, sample_staggered, valid_faces,
