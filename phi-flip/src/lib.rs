@@ -1,1 +1,16 @@
-//! The FLIP liquid simulator (thesis algorithm 1), written once against `phi_core::backend::Backend`.
+//! The FLIP liquid simulator (thesis algorithm 1), written once against
+//! `phi_core::backend::Backend`: 2D and 3D, obstacles (any geometry, rotated, moving), inflows,
+//! FLIP, PIC or a blend, and scenes read from TOML files.
+
+mod error;
+mod scene;
+mod seed;
+mod sim;
+
+pub use error::{FlipError, Result};
+pub use scene::{
+    DomainSpec, InflowSpec, LiquidSpec, PlacementSpec, RunSpec, Scene, SceneSetup, Scheme,
+    SimulationSpec, SolverSpec, TransferSpec,
+};
+pub use seed::{Placement, seed_particles};
+pub use sim::{FlipParams, FlipSimulation, Inflow, Particles, StepStats};

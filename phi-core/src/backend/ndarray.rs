@@ -134,6 +134,9 @@ impl Backend for NdArray {
         if tensor.shape() == shape {
             return tensor;
         }
+        if out_len(shape) < PAR_THRESHOLD {
+            return from_vec(strided_map(&tensor, shape, |x| x), shape);
+        }
         let view = tensor
             .broadcast(shape)
             .expect("the front end checked the broadcast");
@@ -442,12 +445,11 @@ fn standard<T: Copy + Default + Send + Sync>(tensor: &Tensor<T>) -> Cow<'_, [T]>
     if let Some(slice) = tensor.as_slice() {
         return Cow::Borrowed(slice);
     }
-    let mut out = Array::from_elem(tensor.raw_dim(), T::default());
-    if tensor.len() >= PAR_THRESHOLD {
-        Zip::from(&mut out).and(tensor).par_for_each(|o, &x| *o = x);
-    } else {
-        out.assign(tensor);
+    if tensor.len() < PAR_THRESHOLD {
+        return Cow::Owned(strided_map(tensor, tensor.shape(), |x| x));
     }
+    let mut out = Array::from_elem(tensor.raw_dim(), T::default());
+    Zip::from(&mut out).and(tensor).par_for_each(|o, &x| *o = x);
     Cow::Owned(out.into_raw_vec_and_offset().0)
 }
 
@@ -557,14 +559,12 @@ where
             .map(|&x| f(x))
             .collect(),
         Some(s) => s.iter().map(|&x| f(x)).collect(),
+        None if tensor.len() < PAR_THRESHOLD => strided_map(tensor, tensor.shape(), f),
         None => {
             let mut out = Array::from_elem(tensor.raw_dim(), U::default());
-            let zip = Zip::from(&mut out).and(tensor);
-            if tensor.len() >= PAR_THRESHOLD {
-                zip.par_for_each(|o, &x| *o = f(x));
-            } else {
-                zip.for_each(|o, &x| *o = f(x));
-            }
+            Zip::from(&mut out)
+                .and(tensor)
+                .par_for_each(|o, &x| *o = f(x));
             return out.into_shared();
         }
     };
@@ -601,6 +601,9 @@ where
     if a.len() == 1 && b.shape() == shape.as_slice() {
         let x = *a.iter().next().expect("one element");
         return map(b, |y| f(x, y));
+    }
+    if out_len(&shape) < PAR_THRESHOLD {
+        return from_vec(strided_zip(a, b, &shape, f), &shape);
     }
     let (Some(x), Some(y)) = (a.broadcast(shape.as_slice()), b.broadcast(shape.as_slice())) else {
         unreachable!("the front end checked that the shapes broadcast")
@@ -706,6 +709,150 @@ where
         }
     }
     from_vec(out, &out_shape)
+}
+
+// -------------------------------------------------------------------- strided loops
+//
+// Views (slices, permutes, broadcasts) are read with one loop per row of a collapsed index space
+// rather than ndarray's per-element dynamic-rank iteration, which dominates small kernels.
+
+/// Element strides of `t` seen in the (broadcast) `shape`, right-aligned: 0 along the axes where
+/// `t` has length 1 or no axis at all.
+fn strides_in<T>(t: &Tensor<T>, shape: &[usize]) -> Vec<isize> {
+    let offset = shape.len() - t.ndim();
+    (0..shape.len())
+        .map(|i| {
+            if i < offset {
+                return 0;
+            }
+            let k = i - offset;
+            if t.shape()[k] == 1 { 0 } else { t.strides()[k] }
+        })
+        .collect()
+}
+
+/// `shape` with its length-1 axes dropped and neighbouring axes merged wherever every operand
+/// walks them as one (`stride[i − 1] = stride[i] · shape[i]`); at least one axis is left.
+fn collapse<const K: usize>(
+    shape: &[usize],
+    strides: [Vec<isize>; K],
+) -> (Vec<usize>, [Vec<isize>; K]) {
+    let mut out_shape: Vec<usize> = Vec::with_capacity(shape.len());
+    let mut out: [Vec<isize>; K] = std::array::from_fn(|_| Vec::with_capacity(shape.len()));
+    for (i, &n) in shape.iter().enumerate() {
+        if n == 1 {
+            continue;
+        }
+        let merge = !out_shape.is_empty()
+            && (0..K).all(|k| out[k].last() == Some(&(strides[k][i] * n as isize)));
+        if merge {
+            *out_shape.last_mut().expect("not empty") *= n;
+            for k in 0..K {
+                *out[k].last_mut().expect("not empty") = strides[k][i];
+            }
+        } else {
+            out_shape.push(n);
+            for k in 0..K {
+                out[k].push(strides[k][i]);
+            }
+        }
+    }
+    if out_shape.is_empty() {
+        out_shape.push(1);
+        for stride in &mut out {
+            stride.push(0);
+        }
+    }
+    (out_shape, out)
+}
+
+/// Calls `row(offsets, len, strides)` for each row of the last axis of a collapsed index space,
+/// in row-major order: `offsets` are the operands' element offsets of the row's start.
+fn for_each_row<const K: usize>(
+    shape: &[usize],
+    strides: &[Vec<isize>; K],
+    mut row: impl FnMut([isize; K], usize, [isize; K]),
+) {
+    let last = shape.len() - 1;
+    let inner_strides = std::array::from_fn(|k| strides[k][last]);
+    let outer: usize = shape[..last].iter().product();
+    let mut index = vec![0usize; last];
+    let mut offsets = [0isize; K];
+    for _ in 0..outer {
+        row(offsets, shape[last], inner_strides);
+        for axis in (0..last).rev() {
+            index[axis] += 1;
+            for k in 0..K {
+                offsets[k] += strides[k][axis];
+            }
+            if index[axis] < shape[axis] {
+                break;
+            }
+            for k in 0..K {
+                offsets[k] -= strides[k][axis] * shape[axis] as isize;
+            }
+            index[axis] = 0;
+        }
+    }
+}
+
+/// `f` of each element of `t` broadcast to `shape`, in row-major order.
+fn strided_map<T: Copy, U>(t: &Tensor<T>, shape: &[usize], f: impl Fn(T) -> U) -> Vec<U> {
+    let (cshape, [st]) = collapse(shape, [strides_in(t, shape)]);
+    let mut out = Vec::with_capacity(out_len(shape));
+    let base = t.as_ptr();
+    for_each_row(&cshape, &[st], |[o], len, [s]| {
+        // SAFETY: `strides_in` and `collapse` only re-describe `t`'s own index space (broadcast
+        // axes have stride 0), so every offset addresses an element of `t`.
+        unsafe {
+            if s == 1 {
+                let row = std::slice::from_raw_parts(base.offset(o), len);
+                out.extend(row.iter().map(|&x| f(x)));
+            } else {
+                out.extend((0..len).map(|k| f(*base.offset(o + k as isize * s))));
+            }
+        }
+    });
+    out
+}
+
+/// `f(a, b)` over `shape` (both broadcast to it), in row-major order.
+fn strided_zip<T: Copy, U>(
+    a: &Tensor<T>,
+    b: &Tensor<T>,
+    shape: &[usize],
+    f: impl Fn(T, T) -> U,
+) -> Vec<U> {
+    let (cshape, strides) = collapse(shape, [strides_in(a, shape), strides_in(b, shape)]);
+    let mut out = Vec::with_capacity(out_len(shape));
+    let (pa, pb) = (a.as_ptr(), b.as_ptr());
+    for_each_row(&cshape, &strides, |[oa, ob], len, [sa, sb]| {
+        // SAFETY: as in `strided_map`, every offset addresses an element of its operand.
+        unsafe {
+            match (sa, sb) {
+                (1, 1) => {
+                    let x = std::slice::from_raw_parts(pa.offset(oa), len);
+                    let y = std::slice::from_raw_parts(pb.offset(ob), len);
+                    out.extend(x.iter().zip(y).map(|(&x, &y)| f(x, y)));
+                }
+                (1, 0) => {
+                    let x = std::slice::from_raw_parts(pa.offset(oa), len);
+                    let y = *pb.offset(ob);
+                    out.extend(x.iter().map(|&x| f(x, y)));
+                }
+                (0, 1) => {
+                    let x = *pa.offset(oa);
+                    let y = std::slice::from_raw_parts(pb.offset(ob), len);
+                    out.extend(y.iter().map(|&y| f(x, y)));
+                }
+                _ => out.extend((0..len).map(|k| {
+                    let k = k as isize;
+                    f(*pa.offset(oa + k * sa), *pb.offset(ob + k * sb))
+                })),
+            }
+        }
+    });
+    out
 }
 
 // -------------------------------------------------------------------- matmul
