@@ -8,6 +8,8 @@
 
 pub mod backends;
 pub mod demo;
+pub mod output;
+pub mod simulate;
 
 pub use phi_core;
 pub use phi_core::{AutodiffBackend, Backend, IntTensor, Tensor, TensorError};

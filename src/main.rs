@@ -3,7 +3,11 @@
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use phi::backends::BackendKind;
+use std::path::PathBuf;
+
 use phi::demo::{self, DemoReport};
+use phi::phi_flip::Scene;
+use phi::simulate::{SimulateOptions, check_out_dir, simulate};
 use phi::{with_autodiff_backend, with_backend};
 
 #[derive(Parser)]
@@ -26,6 +30,32 @@ enum Command {
         /// Run on these backends only (default: all compiled in).
         #[arg(long, value_delimiter = ',')]
         backend: Vec<BackendKind>,
+    },
+    /// Simulate a scene file: trajectory (.npz), frames (PNG), an animated GIF and a summary.
+    Simulate {
+        /// The scene (TOML; see scenes/ for examples).
+        scene: PathBuf,
+        /// The output directory.
+        #[arg(long)]
+        out: PathBuf,
+        /// The backend (default: the scene's `[run] backend`, else ndarray).
+        #[arg(long)]
+        backend: Option<BackendKind>,
+        /// The device; the CPU backends have only `cpu`.
+        #[arg(long)]
+        device: Option<String>,
+        /// Run this many steps instead of the scene's.
+        #[arg(long)]
+        steps: Option<usize>,
+        /// Render a frame every this many steps (0: no frames).
+        #[arg(long, default_value_t = 1)]
+        frame_every: usize,
+        /// Pixels per grid cell in the frames.
+        #[arg(long, default_value_t = 6)]
+        pixels_per_cell: u32,
+        /// Rewrite the trajectory file every this many steps, so a killed run keeps them.
+        #[arg(long, default_value_t = 25)]
+        checkpoint_every: usize,
     },
 }
 
@@ -53,7 +83,82 @@ fn main() -> Result<()> {
         } else {
             backend
         }),
+        Command::Simulate {
+            scene,
+            out,
+            backend,
+            device,
+            steps,
+            frame_every,
+            pixels_per_cell,
+            checkpoint_every,
+        } => run_simulate(
+            SimulateOptions {
+                scene,
+                out,
+                frame_every,
+                checkpoint_every,
+                pixels_per_cell,
+                steps,
+                progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
+            },
+            backend,
+            device,
+        ),
     }
+}
+
+fn run_simulate(
+    options: SimulateOptions,
+    backend: Option<BackendKind>,
+    device: Option<String>,
+) -> Result<()> {
+    let scene = Scene::from_file(&options.scene)?;
+    let kind = match (backend, &scene.run.backend) {
+        (Some(kind), _) => kind,
+        (None, Some(name)) => name
+            .parse()
+            .with_context(|| format!("{}: run.backend", options.scene.display()))?,
+        (None, None) => BackendKind::available()[0],
+    };
+    if let Some(device) = device.as_deref().or(scene.run.device.as_deref())
+        && device != "cpu"
+    {
+        bail!(
+            "device `{device}` is not available: the {kind} backend of this build runs on the \
+             CPU only (use --device cpu)"
+        );
+    }
+    check_out_dir(&options.out)?;
+    println!(
+        "{}: {}",
+        options.scene.display(),
+        scene.description.as_deref().unwrap_or("(no description)")
+    );
+    let summary = with_backend!(kind, B => simulate::<B>(&scene, &options))?;
+    println!(
+        "{} steps of {} particles on {} in {:.2} s: {:.1} steps/s ({:.3} ms/step); pressure solve: \
+         {:.1} iterations on average, {} at most; largest step {:.2} cells",
+        summary.steps,
+        summary.particles,
+        summary.backend,
+        summary.simulation_seconds,
+        summary.steps_per_second,
+        1e3 / summary.steps_per_second,
+        summary.solver_iterations_mean,
+        summary.solver_iterations_max,
+        summary.max_displacement_cells,
+    );
+    println!(
+        "wrote {}/trajectory.npz, run.json{}",
+        options.out.display(),
+        if summary.frames > 0 {
+            format!(", {} frames and simulation.gif", summary.frames)
+        } else {
+            String::new()
+        }
+    );
+    Ok(())
 }
 
 fn run_demo(kinds: Vec<BackendKind>) -> Result<()> {

@@ -1,0 +1,340 @@
+//! `phi simulate`: runs a scene file and writes the trajectory, frames and a GIF.
+//!
+//! Output directory:
+//! - `trajectory.npz`: `positions` and `velocities` `[T+1, N, d]` float32 (frame 0 is the initial
+//!   state; with inflows, `N` is the final particle count and rows of particles that do not exist
+//!   yet are NaN), `particle_type [N]` int32 (1 = liquid), `particle_count [T+1]` int32, `time
+//!   [T+1]` float32, `steps_completed [1]` int64. It is rewritten (atomically) every
+//!   `checkpoint_every` steps, so a killed run leaves the steps done so far.
+//! - `run.json`: the scene, the backend, and run facts; `"complete": false` until the last step
+//!   is written.
+//! - `frames/frame_NNNNN.png` and `simulation.gif` (written frame by frame).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use phi_core::Backend;
+use phi_flip::{Particles, Scene};
+use serde::Serialize;
+
+use crate::output::{
+    ArrayData, FrameStyle, GifWriter, KIND_LIQUID, NpyArray, render_frame, write_npz, write_png,
+};
+
+/// How to run and what to write.
+#[derive(Debug, Clone)]
+pub struct SimulateOptions {
+    /// The scene file.
+    pub scene: PathBuf,
+    /// The output directory (created if missing).
+    pub out: PathBuf,
+    /// Render a frame every this many steps (0: no frames, no GIF).
+    pub frame_every: usize,
+    /// Rewrite the trajectory file every this many steps.
+    pub checkpoint_every: usize,
+    /// Pixels per cell of the frames.
+    pub pixels_per_cell: u32,
+    /// Override of the scene's step count.
+    pub steps: Option<usize>,
+    /// Show a progress bar.
+    pub progress: bool,
+}
+
+/// What a run did.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunSummary {
+    /// The backend's name.
+    pub backend: String,
+    /// Steps run.
+    pub steps: usize,
+    /// Particles at the end.
+    pub particles: usize,
+    /// Wall time of the steps alone (no output), seconds.
+    pub simulation_seconds: f64,
+    /// Steps per second of the steps alone.
+    pub steps_per_second: f64,
+    /// Mean and largest iterations of the pressure solves (0 for direct solves).
+    pub solver_iterations_mean: f64,
+    /// Largest iteration count.
+    pub solver_iterations_max: usize,
+    /// Largest relative residual is not tracked; the largest absolute residual of the solves.
+    pub solver_residual_max: f64,
+    /// The largest per-step particle displacement, in cells.
+    pub max_displacement_cells: f32,
+    /// Frames rendered.
+    pub frames: usize,
+    /// Whether every step completed.
+    pub complete: bool,
+}
+
+#[derive(Serialize)]
+struct RunFile<'a> {
+    scene_file: String,
+    scene: &'a Scene,
+    dimension: usize,
+    dt: f32,
+    phi_version: &'static str,
+    #[serde(flatten)]
+    summary: &'a RunSummary,
+}
+
+/// Runs `scene` on backend `B` and writes everything to `options.out`.
+///
+/// # Errors
+/// Scene errors, a failing step (non-finite state, solver failure) and I/O errors, with the path.
+pub fn simulate<B: Backend>(scene: &Scene, options: &SimulateOptions) -> Result<RunSummary> {
+    let origin = options.scene.display().to_string();
+    let device = B::default_device();
+    let setup = scene.build::<B>(&origin, &device)?;
+    let sim = setup.simulation;
+    let steps = options.steps.unwrap_or(setup.steps);
+    let d = sim.domain().dim();
+    let out = &options.out;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let frames_dir = out.join("frames");
+    if options.frame_every > 0 {
+        std::fs::create_dir_all(&frames_dir)
+            .with_context(|| format!("creating {}", frames_dir.display()))?;
+    }
+
+    let mut summary = RunSummary {
+        backend: B::name().to_string(),
+        steps: 0,
+        particles: setup.particles.len(),
+        simulation_seconds: 0.0,
+        steps_per_second: 0.0,
+        solver_iterations_mean: 0.0,
+        solver_iterations_max: 0,
+        solver_residual_max: 0.0,
+        max_displacement_cells: 0.0,
+        frames: 0,
+        complete: false,
+    };
+    write_run_file(out, &origin, scene, sim.params().dt, d, &summary)?;
+
+    let solid = sim.solid_cells(0.0)?;
+    let style = FrameStyle {
+        pixels_per_cell: options.pixels_per_cell,
+        ..FrameStyle::default()
+    };
+    let mut gif: Option<GifWriter> = None;
+    let mut history: Vec<(Vec<f32>, Vec<f32>)> = Vec::with_capacity(steps + 1);
+    let mut particles: Particles<B> = setup.particles;
+    let record = |p: &Particles<B>| (p.positions.to_vec(), p.velocities.to_vec());
+    history.push(record(&particles));
+
+    let bar = if options.progress {
+        let bar = ProgressBar::new(steps as u64);
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{spinner} {elapsed_precise} [{bar:40}] {pos}/{len} steps, {per_sec}, ETA {eta} {msg}",
+            )
+            .expect("a valid template")
+            .progress_chars("=> "),
+        );
+        bar
+    } else {
+        ProgressBar::hidden()
+    };
+
+    let mut iterations_total = 0usize;
+    let render = |step: usize,
+                  host: &[f32],
+                  gif: &mut Option<GifWriter>,
+                  frames: &mut usize|
+     -> Result<()> {
+        let time = step as f32 * sim.params().dt;
+        let solid_now = if sim.obstacles().iter().any(|o| o.is_moving()) {
+            sim.solid_cells(time)?
+        } else {
+            solid.clone()
+        };
+        let kinds = vec![KIND_LIQUID; host.len() / d];
+        let (view, lower, upper, res, mask) = side_view(host, d, sim.domain(), &solid_now);
+        let image = render_frame(&view, d, &kinds, &lower, &upper, &res, Some(&mask), &style)?;
+        let path = frames_dir.join(format!("frame_{step:05}.png"));
+        write_png(&path, &image)?;
+        if gif.is_none() {
+            *gif = Some(GifWriter::create(
+                &out.join("simulation.gif"),
+                image.width,
+                image.height,
+                5,
+            )?);
+        }
+        if let Some(g) = gif.as_mut() {
+            g.add_frame(&image)?;
+        }
+        *frames += 1;
+        Ok(())
+    };
+    if options.frame_every > 0 {
+        render(0, &history[0].0, &mut gif, &mut summary.frames)?;
+    }
+
+    for step in 0..steps {
+        let started = Instant::now();
+        let (next, stats) = sim
+            .step(&particles, step)
+            .with_context(|| format!("{origin}: the simulation failed"))?;
+        summary.simulation_seconds += started.elapsed().as_secs_f64();
+        particles = next;
+        iterations_total += stats.solve.iterations;
+        summary.solver_iterations_max = summary.solver_iterations_max.max(stats.solve.iterations);
+        summary.solver_residual_max = summary.solver_residual_max.max(stats.solve.residual);
+        summary.max_displacement_cells = summary
+            .max_displacement_cells
+            .max(stats.max_displacement_cells);
+        summary.steps = step + 1;
+        summary.particles = particles.len();
+        history.push(record(&particles));
+        if options.frame_every > 0 && (step + 1) % options.frame_every == 0 {
+            render(
+                step + 1,
+                &history[step + 1].0,
+                &mut gif,
+                &mut summary.frames,
+            )?;
+        }
+        if options.checkpoint_every > 0
+            && (step + 1) % options.checkpoint_every == 0
+            && step + 1 < steps
+        {
+            write_trajectory(out, &history, d, sim.params().dt)?;
+        }
+        bar.set_message(format!("{} particles", particles.len()));
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+
+    summary.solver_iterations_mean = iterations_total as f64 / steps.max(1) as f64;
+    summary.steps_per_second = summary.steps as f64 / summary.simulation_seconds.max(1e-12);
+    write_trajectory(out, &history, d, sim.params().dt)?;
+    if let Some(g) = gif {
+        g.finish()?;
+    }
+    summary.complete = true;
+    write_run_file(out, &origin, scene, sim.params().dt, d, &summary)?;
+    Ok(summary)
+}
+
+fn write_run_file(
+    out: &Path,
+    origin: &str,
+    scene: &Scene,
+    dt: f32,
+    d: usize,
+    summary: &RunSummary,
+) -> Result<()> {
+    let file = RunFile {
+        scene_file: origin.to_string(),
+        scene,
+        dimension: d,
+        dt,
+        phi_version: env!("CARGO_PKG_VERSION"),
+        summary,
+    };
+    let text = serde_json::to_string_pretty(&file)?;
+    atomic_write(&out.join("run.json"), text.as_bytes())
+}
+
+/// Writes `bytes` to `path` through a temporary file and a rename.
+pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<()> {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = path.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
+    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path)
+        .with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))?;
+    Ok(())
+}
+
+/// The trajectory so far as `trajectory.npz` (see the module docs).
+fn write_trajectory(out: &Path, history: &[(Vec<f32>, Vec<f32>)], d: usize, dt: f32) -> Result<()> {
+    let frames = history.len();
+    let n = history.iter().map(|(p, _)| p.len() / d).max().unwrap_or(0);
+    let mut positions = vec![f32::NAN; frames * n * d];
+    let mut velocities = vec![f32::NAN; frames * n * d];
+    let mut counts = Vec::with_capacity(frames);
+    for (t, (p, v)) in history.iter().enumerate() {
+        positions[t * n * d..t * n * d + p.len()].copy_from_slice(p);
+        velocities[t * n * d..t * n * d + v.len()].copy_from_slice(v);
+        counts.push((p.len() / d) as i32);
+    }
+    let time: Vec<f32> = (0..frames).map(|t| t as f32 * dt).collect();
+    let arrays = [
+        (
+            "positions",
+            NpyArray::new(vec![frames, n, d], ArrayData::F32(positions))?,
+        ),
+        (
+            "velocities",
+            NpyArray::new(vec![frames, n, d], ArrayData::F32(velocities))?,
+        ),
+        (
+            "particle_type",
+            NpyArray::new(vec![n], ArrayData::I32(vec![i32::from(KIND_LIQUID); n]))?,
+        ),
+        (
+            "particle_count",
+            NpyArray::new(vec![frames], ArrayData::I32(counts))?,
+        ),
+        ("time", NpyArray::new(vec![frames], ArrayData::F32(time))?),
+        (
+            "steps_completed",
+            NpyArray::new(vec![1], ArrayData::I64(vec![frames as i64 - 1]))?,
+        ),
+    ];
+    let refs: Vec<(&str, &NpyArray)> = arrays.iter().map(|(k, a)| (*k, a)).collect();
+    write_npz(&out.join("trajectory.npz"), &refs)?;
+    Ok(())
+}
+
+/// What the frames show: 2D as it is; 3D seen from the side (horizontal axis x, vertical axis
+/// z, the last axis, along which gravity pulls by default), depth y. Returns positions, bounds,
+/// resolution and solid cells in the order the renderer takes (its axes 0 and 1 on screen).
+fn side_view(
+    positions: &[f32],
+    d: usize,
+    domain: &phi_core::fields::Domain,
+    solid: &[bool],
+) -> (Vec<f32>, Vec<f32>, Vec<f32>, Vec<usize>, Vec<bool>) {
+    let (lower, upper, res) = (domain.lower(), domain.upper(), domain.resolution());
+    if d != 3 {
+        return (
+            positions.to_vec(),
+            lower.to_vec(),
+            upper.to_vec(),
+            res.to_vec(),
+            solid.to_vec(),
+        );
+    }
+    let order = [0usize, 2, 1];
+    let view = positions
+        .chunks(3)
+        .flat_map(|p| order.map(|a| p[a]))
+        .collect();
+    let permute_f = |v: &[f32]| order.iter().map(|&a| v[a]).collect::<Vec<f32>>();
+    let new_res: Vec<usize> = order.iter().map(|&a| res[a]).collect();
+    let mut mask = vec![false; solid.len()];
+    for i in 0..res[0] {
+        for j in 0..res[1] {
+            for k in 0..res[2] {
+                mask[(i * res[2] + k) * res[1] + j] = solid[(i * res[1] + j) * res[2] + k];
+            }
+        }
+    }
+    (view, permute_f(lower), permute_f(upper), new_res, mask)
+}
+
+/// Refuses an output directory that is a file.
+pub fn check_out_dir(out: &Path) -> Result<()> {
+    if out.exists() && !out.is_dir() {
+        bail!("{} exists and is not a directory", out.display());
+    }
+    Ok(())
+}
