@@ -1,6 +1,8 @@
 //! Integration tests of phi: one binary, modules by topic.
 
 #[cfg(feature = "ndarray")]
+mod cli;
+#[cfg(feature = "ndarray")]
 mod conformance;
 #[cfg(feature = "ndarray")]
 mod fields;

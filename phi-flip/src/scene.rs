@@ -453,21 +453,21 @@ impl Scene {
                 format!("must be positive and finite, got {}", s.dt),
             ));
         }
-        if let Some(g) = &s.gravity {
-            if g.len() != d || g.iter().any(|v| !v.is_finite()) {
-                return Err(error(
-                    "simulation.gravity".into(),
-                    format!("needs {d} finite components, got {g:?}"),
-                ));
-            }
+        if let Some(g) = &s.gravity
+            && (g.len() != d || g.iter().any(|v| !v.is_finite()))
+        {
+            return Err(error(
+                "simulation.gravity".into(),
+                format!("needs {d} finite components, got {g:?}"),
+            ));
         }
-        if let Some(r) = s.flip_ratio {
-            if !(0.0..=1.0).contains(&r) {
-                return Err(error(
-                    "simulation.flip_ratio".into(),
-                    format!("must lie in [0, 1], got {r}"),
-                ));
-            }
+        if let Some(r) = s.flip_ratio
+            && !(0.0..=1.0).contains(&r)
+        {
+            return Err(error(
+                "simulation.flip_ratio".into(),
+                format!("must lie in [0, 1], got {r}"),
+            ));
         }
         if s.particles_per_cell == 0 {
             return Err(error(
@@ -545,13 +545,13 @@ impl Scene {
                 ));
             }
         }
-        if let Some(b) = &self.run.backend {
-            if !["ndarray", "burn", "tch"].contains(&b.as_str()) {
-                return Err(error(
-                    "run.backend".into(),
-                    format!("unknown backend {b:?}"),
-                ));
-            }
+        if let Some(b) = &self.run.backend
+            && !["ndarray", "burn", "tch"].contains(&b.as_str())
+        {
+            return Err(error(
+                "run.backend".into(),
+                format!("unknown backend {b:?}"),
+            ));
         }
         Ok(())
     }

@@ -5,7 +5,7 @@ use phi_core::fields::{
     CenteredGrid, Domain, PointCloud, ProjectionMasks, StaggeredGrid, Transfer, extrapolate_valid,
     occupied_cells, particles_to_staggered, pressure_projection, sample_staggered, valid_faces,
 };
-use phi_core::solve::{SolveOptions, SolveStats};
+use phi_core::solve::{Preconditioner, SolveMethod, SolveOptions, SolveStats};
 use phi_core::{Tensor, TensorError};
 use phi_geom::{Geometry, Obstacle, PushDirection};
 
@@ -47,7 +47,9 @@ impl FlipParams {
             gravity,
             flip_ratio: 1.0,
             transfer: Transfer::Linear,
-            solve: SolveOptions::default(),
+            solve: SolveOptions::with_method(SolveMethod::ConjugateGradient(
+                Preconditioner::IncompleteCholesky,
+            )),
             push_offset: 0.0,
             cfl_warning_cells: 3.0,
         }
@@ -385,7 +387,8 @@ impl<B: Backend> FlipSimulation<B> {
     pub fn emit(&self, particles: &Particles<B>, step: usize) -> Result<Particles<B>> {
         let mut out = particles.clone();
         for (i, inflow) in self.inflows.iter().enumerate() {
-            let active = step % inflow.every == 0 && inflow.until_step.is_none_or(|u| step < u);
+            let active =
+                step.is_multiple_of(inflow.every) && inflow.until_step.is_none_or(|u| step < u);
             if !active {
                 continue;
             }

@@ -608,6 +608,43 @@ pub trait Backend: Copy + Clone + Debug + Default + Send + Sync + 'static {
 
     // ---------------------------------------------------------------- sparse linear solves
 
+    // ---------------------------------------------------------------- particle ↔ grid kernels
+
+    /// Multilinear (tent) interpolation of `values [samples, c]`, the samples of `lattice` in
+    /// row-major order, at `points [N, d]`: `[N, c]`. Points are first turned into continuous
+    /// sample indices `(x − origin) / spacing` and clamped to `[0, shape − 1]` per axis (constant
+    /// extrapolation beyond the outermost samples). The default is built from the primitive
+    /// operations and is differentiable in `values` and `points`; a backend overrides it with a
+    /// fused kernel giving the same values.
+    ///
+    /// # Errors
+    /// Only shape errors, which the callers in [`crate::fields`] rule out.
+    fn float_lattice_sample(
+        lattice: &crate::fields::SampleLattice,
+        values: Self::Float,
+        points: Self::Float,
+    ) -> Result<Self::Float> {
+        crate::fields::sample::composite_lattice_sample::<Self>(lattice, values, points)
+    }
+
+    /// Particle → grid transfer onto the samples of `lattice`: `(Σ w v, Σ w)` with shapes
+    /// `([samples, c], [samples, 1])` for `values [N, c]` at `points [N, d]`, where `w` are the
+    /// tent weights of the `2^d` surrounding samples ([`Transfer::Linear`](crate::fields::Transfer),
+    /// indices clamped as in [`Backend::float_lattice_sample`]) or 1 for the nearest sample
+    /// ([`Transfer::NearestFace`](crate::fields::Transfer)). The default is built from the primitive
+    /// operations (differentiable); a backend may override it with a fused kernel.
+    ///
+    /// # Errors
+    /// Only shape errors, which the callers in [`crate::fields`] rule out.
+    fn float_lattice_splat(
+        lattice: &crate::fields::SampleLattice,
+        points: Self::Float,
+        values: Self::Float,
+        transfer: crate::fields::Transfer,
+    ) -> Result<(Self::Float, Self::Float)> {
+        crate::fields::sample::composite_lattice_splat::<Self>(lattice, points, values, transfer)
+    }
+
     /// The solution `x` of `matrix · x = rhs` and what the solve did. `rhs` is `[n]` or `[n, k]`
     /// (`k` right-hand sides, one per column) with `n = matrix.nrows()` of a square matrix; `x`
     /// has the shape and device of `rhs`. The matrix is a host-side constant (`f64`); the solve

@@ -21,6 +21,7 @@ use rayon::prelude::*;
 
 use super::{Backend, BinaryOp, CompareOp, IntBinaryOp, PadMode, ReduceOp, UnaryOp};
 use crate::error::{Result, TensorError};
+use crate::fields::{SampleLattice, Transfer};
 
 /// The CPU backend on ndarray and rayon. Forward only: gradients need the Burn or tch backend.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -425,6 +426,95 @@ impl Backend for NdArray {
     fn int_gather_rows(tensor: Self::Int, indices: Self::Int) -> Result<Self::Int> {
         gather_rows(&tensor, &indices, "int_gather_rows")
     }
+
+    fn float_lattice_sample(
+        lattice: &SampleLattice,
+        values: Self::Float,
+        points: Self::Float,
+    ) -> Result<Self::Float> {
+        let c = values.shape()[1];
+        let n = points.shape()[0];
+        let d = lattice.shape.len();
+        let (v, p) = (standard(&values), standard(&points));
+        let indexer = LatticeIndexer::new(lattice);
+        let mut out = vec![0.0f32; n * c];
+        let mut base = vec![0usize; d];
+        let mut fraction = vec![0.0f32; d];
+        for (point, row) in p.chunks_exact(d).zip(out.chunks_exact_mut(c)) {
+            indexer.linear(point, &mut base, &mut fraction);
+            let flat: usize = base.iter().zip(&indexer.strides).map(|(b, s)| b * s).sum();
+            for corner in 0..1usize << d {
+                let (offset, weight) = indexer.corner(corner, &fraction);
+                let sample = &v[(flat + offset) * c..(flat + offset + 1) * c];
+                for (o, &x) in row.iter_mut().zip(sample) {
+                    *o += x * weight;
+                }
+            }
+        }
+        Ok(from_vec(out, &[n, c]))
+    }
+
+    fn float_lattice_splat(
+        lattice: &SampleLattice,
+        points: Self::Float,
+        values: Self::Float,
+        transfer: Transfer,
+    ) -> Result<(Self::Float, Self::Float)> {
+        let c = values.shape()[1];
+        let n = points.shape()[0];
+        let d = lattice.shape.len();
+        let samples: usize = lattice.shape.iter().product();
+        let (v, p) = (standard(&values), standard(&points));
+        let indexer = LatticeIndexer::new(lattice);
+        let mut sums = vec![0.0f32; samples * c];
+        let mut weights = vec![0.0f32; samples];
+        match transfer {
+            Transfer::NearestFace => {
+                let mut index = vec![0usize; d];
+                for (point, value) in p.chunks_exact(d).zip(v.chunks_exact(c)) {
+                    indexer.nearest(point, &mut index);
+                    let flat: usize = index.iter().zip(&indexer.strides).map(|(b, s)| b * s).sum();
+                    for (s, &x) in sums[flat * c..(flat + 1) * c].iter_mut().zip(value) {
+                        *s += x;
+                    }
+                    weights[flat] += 1.0;
+                }
+            }
+            Transfer::Linear => {
+                // Corner-major, as the composite scatter adds, so that the sums round the same.
+                let mut flats = Vec::with_capacity(n);
+                let mut fractions = vec![0.0f32; n * d];
+                let mut base = vec![0usize; d];
+                for (point, fraction) in p.chunks_exact(d).zip(fractions.chunks_exact_mut(d)) {
+                    indexer.linear(point, &mut base, fraction);
+                    flats.push(
+                        base.iter()
+                            .zip(&indexer.strides)
+                            .map(|(b, s)| b * s)
+                            .sum::<usize>(),
+                    );
+                }
+                for corner in 0..1usize << d {
+                    for ((&flat, fraction), value) in flats
+                        .iter()
+                        .zip(fractions.chunks_exact(d))
+                        .zip(v.chunks_exact(c))
+                    {
+                        let (offset, weight) = indexer.corner(corner, fraction);
+                        let at = flat + offset;
+                        for (s, &x) in sums[at * c..(at + 1) * c].iter_mut().zip(value) {
+                            *s += x * weight;
+                        }
+                        weights[at] += weight;
+                    }
+                }
+            }
+        }
+        Ok((
+            from_vec(sums, &[samples, c]),
+            from_vec(weights, &[samples, 1]),
+        ))
+    }
 }
 
 // -------------------------------------------------------------------- layout and shape helpers
@@ -709,6 +799,85 @@ where
         }
     }
     from_vec(out, &out_shape)
+}
+
+// -------------------------------------------------------------------- particle ↔ grid kernels
+
+/// The index arithmetic of the multilinear stencil, operation for operation as the composite
+/// default in `fields::sample` does it (so the fused kernels give the same values).
+struct LatticeIndexer {
+    origin: Vec<f32>,
+    inverse_spacing: Vec<f32>,
+    /// `shape − 1`: the clamp of continuous indices.
+    upper: Vec<f32>,
+    /// `max(shape − 2, 0)`: the highest lower corner.
+    highest_base: Vec<f32>,
+    strides: Vec<usize>,
+    shape: Vec<usize>,
+}
+
+impl LatticeIndexer {
+    fn new(lattice: &SampleLattice) -> Self {
+        let d = lattice.shape.len();
+        let mut strides = vec![1usize; d];
+        for axis in (0..d.saturating_sub(1)).rev() {
+            strides[axis] = strides[axis + 1] * lattice.shape[axis + 1];
+        }
+        Self {
+            origin: lattice.origin.clone(),
+            inverse_spacing: lattice.spacing.iter().map(|s| 1.0 / s).collect(),
+            upper: lattice.shape.iter().map(|&s| (s - 1) as f32).collect(),
+            highest_base: lattice
+                .shape
+                .iter()
+                .map(|&s| s.saturating_sub(2) as f32)
+                .collect(),
+            strides,
+            shape: lattice.shape.clone(),
+        }
+    }
+
+    fn continuous(&self, x: f32, axis: usize) -> f32 {
+        ((x - self.origin[axis]) * self.inverse_spacing[axis])
+            .max(0.0)
+            .min(self.upper[axis])
+    }
+
+    /// The lower corner and the fractions of `point`.
+    fn linear(&self, point: &[f32], base: &mut [usize], fraction: &mut [f32]) {
+        for (axis, &x) in point.iter().enumerate() {
+            let t = self.continuous(x, axis);
+            let b = t.floor().min(self.highest_base[axis]);
+            base[axis] = b as usize;
+            fraction[axis] = t - b;
+        }
+    }
+
+    /// The nearest sample of `point`.
+    fn nearest(&self, point: &[f32], index: &mut [usize]) {
+        for (axis, &x) in point.iter().enumerate() {
+            index[axis] = (self.continuous(x, axis) + 0.5)
+                .floor()
+                .min(self.upper[axis]) as usize;
+        }
+    }
+
+    /// The flat offset from the lower corner and the weight of `corner` (bit `d − 1 − axis` set:
+    /// the upper sample along `axis`).
+    fn corner(&self, corner: usize, fraction: &[f32]) -> (usize, f32) {
+        let d = fraction.len();
+        let mut offset = 0;
+        let mut weight = 1.0f32;
+        for (axis, &f) in fraction.iter().enumerate() {
+            let upper = (corner >> (d - 1 - axis)) & 1 == 1;
+            if upper && self.shape[axis] > 1 {
+                offset += self.strides[axis];
+            }
+            let factor = if upper { f } else { 1.0 - f };
+            weight = if axis == 0 { factor } else { weight * factor };
+        }
+        (offset, weight)
+    }
 }
 
 // -------------------------------------------------------------------- strided loops

@@ -20,7 +20,7 @@ mod grid;
 pub mod ops;
 mod point_cloud;
 mod projection;
-mod sample;
+pub(crate) mod sample;
 
 pub use advect::{Integrator, advect_points, advect_semi_lagrangian};
 pub use domain::{Boundary, Domain};
@@ -33,8 +33,8 @@ pub use ops::{
 pub use point_cloud::PointCloud;
 pub use projection::{Projection, ProjectionMasks, pressure_projection};
 pub use sample::{
-    Transfer, count_particles, occupied_cells, particles_to_centered, particles_to_staggered,
-    sample_centered, sample_face_component, sample_staggered, valid_faces,
+    SampleLattice, Transfer, count_particles, occupied_cells, particles_to_centered,
+    particles_to_staggered, sample_centered, sample_face_component, sample_staggered, valid_faces,
 };
 
 #[cfg(all(test, feature = "ndarray"))]

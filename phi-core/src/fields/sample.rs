@@ -31,12 +31,17 @@ pub enum Transfer {
     NearestFace,
 }
 
-/// Where the samples of a grid lie: `origin + k Δx` for `k` in `0..shape`.
-#[derive(Debug, Clone)]
-struct SampleLattice {
-    origin: Vec<f32>,
-    spacing: Vec<f32>,
-    shape: Vec<usize>,
+/// Where the samples of a grid lie: `origin + k Δx` for `k` in `0..shape` along each axis (the
+/// cell centres of a domain, or the faces of one staggered component). What
+/// [`Backend::float_lattice_sample`] and [`Backend::float_lattice_splat`] work on.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SampleLattice {
+    /// The position of sample `0`.
+    pub origin: Vec<f32>,
+    /// The distance between neighbouring samples per axis.
+    pub spacing: Vec<f32>,
+    /// Samples per axis.
+    pub shape: Vec<usize>,
 }
 
 impl SampleLattice {
@@ -164,6 +169,34 @@ impl SampleLattice {
         })
     }
 
+    /// `values [samples, c]` (row-major over `shape`) interpolated multilinearly at `points [N, d]`:
+    /// `[N, c]`, through the backend's [`Backend::float_lattice_sample`].
+    fn sample<B: Backend>(&self, values: &Tensor<B>, points: &Tensor<B>) -> Result<Tensor<B>> {
+        let out =
+            B::float_lattice_sample(self, values.primitive().clone(), points.primitive().clone())?;
+        Ok(Tensor::from_primitive(out))
+    }
+
+    /// `(Σ w v [samples, c], Σ w [samples, 1])` of `values [N, c]` at `points [N, d]`, through the
+    /// backend's [`Backend::float_lattice_splat`].
+    fn splat<B: Backend>(
+        &self,
+        points: &Tensor<B>,
+        values: &Tensor<B>,
+        transfer: Transfer,
+    ) -> Result<(Tensor<B>, Tensor<B>)> {
+        let (sums, weights) = B::float_lattice_splat(
+            self,
+            points.primitive().clone(),
+            values.primitive().clone(),
+            transfer,
+        )?;
+        Ok((
+            Tensor::from_primitive(sums),
+            Tensor::from_primitive(weights),
+        ))
+    }
+
     fn stencil<B: Backend>(&self, points: &Tensor<B>, transfer: Transfer) -> Result<Stencil<B>> {
         match transfer {
             Transfer::Linear => self.linear_stencil(points),
@@ -213,6 +246,37 @@ impl<B: Backend> Stencil<B> {
     }
 }
 
+/// [`Backend::float_lattice_sample`] from tensor operations (the default of every backend;
+/// differentiable in the values and the points).
+pub(crate) fn composite_lattice_sample<B: Backend>(
+    lattice: &SampleLattice,
+    values: B::Float,
+    points: B::Float,
+) -> Result<B::Float> {
+    let points = Tensor::<B>::from_primitive(points);
+    let values = Tensor::<B>::from_primitive(values);
+    Ok(lattice
+        .linear_stencil(&points)?
+        .gather(&values)?
+        .into_primitive())
+}
+
+/// [`Backend::float_lattice_splat`] from tensor operations (the default of every backend).
+pub(crate) fn composite_lattice_splat<B: Backend>(
+    lattice: &SampleLattice,
+    points: B::Float,
+    values: B::Float,
+    transfer: Transfer,
+) -> Result<(B::Float, B::Float)> {
+    let points = Tensor::<B>::from_primitive(points);
+    let values = Tensor::<B>::from_primitive(values);
+    let samples = lattice.shape.iter().product();
+    let (sums, weights) = lattice
+        .stencil(&points, transfer)?
+        .scatter(&values, samples)?;
+    Ok((sums.into_primitive(), weights.into_primitive()))
+}
+
 /// `sums / weights` where `weights > 0`, 0 elsewhere, with a denominator that is never zero (so
 /// gradients stay finite).
 fn normalise<B: Backend>(sums: &Tensor<B>, weights: &Tensor<B>) -> Tensor<B> {
@@ -259,7 +323,7 @@ pub fn sample_face_component<B: Backend>(
     }
     let n = points.shape()[0];
     let flat = component.reshape(&[component.numel(), 1])?;
-    lattice.linear_stencil(points)?.gather(&flat)?.reshape(&[n])
+    lattice.sample(&flat, points)?.reshape(&[n])
 }
 
 /// A staggered vector field sampled at `points [N, d]`: component `i` of the result is
@@ -302,7 +366,7 @@ pub fn sample_centered<B: Backend>(
     let flat = grid
         .values()
         .reshape(&[domain.cell_count(), grid.channels()])?;
-    lattice.linear_stencil(points)?.gather(&flat)
+    lattice.sample(&flat, points)
 }
 
 /// Particle velocities `cloud.values() [N, d]` at `cloud.positions() [N, d]` transferred to the
@@ -340,9 +404,9 @@ pub fn particles_to_staggered<B: Backend>(
     for axis in 0..d {
         let lattice = SampleLattice::of(domain, Some(axis));
         let samples: usize = lattice.shape.iter().product();
-        let stencil = lattice.stencil(cloud.positions(), transfer)?;
         let column = cloud.values().narrow(1, axis..axis + 1)?;
-        let (sums, weight_sums) = stencil.scatter(&column, samples)?;
+        let (sums, weight_sums) = lattice.splat(cloud.positions(), &column, transfer)?;
+        debug_assert_eq!(sums.shape()[0], samples);
         values.push(normalise(&sums, &weight_sums).reshape(&lattice.shape)?);
         weights.push(weight_sums.reshape(&lattice.shape)?);
     }
@@ -377,8 +441,7 @@ pub fn particles_to_centered<B: Backend>(
         });
     }
     let lattice = SampleLattice::of(domain, None);
-    let stencil = lattice.stencil(cloud.positions(), transfer)?;
-    let (sums, weight_sums) = stencil.scatter(cloud.values(), domain.cell_count())?;
+    let (sums, weight_sums) = lattice.splat(cloud.positions(), cloud.values(), transfer)?;
     let mut shape = domain.resolution().to_vec();
     shape.push(c);
     let values = normalise(&sums, &weight_sums).reshape(&shape)?;

@@ -1,0 +1,117 @@
+//! The fields layer per backend: pressure projection of a random velocity on a tank half full of
+//! liquid (32², 64², 128², 64³; the matrix is assembled and factorised in every call, as in a
+//! FLIP step, where the liquid moves), and particle → grid / grid → particle transfers with 10k
+//! and 100k particles on a 64² grid.
+//!
+//! `cargo bench --bench fields --features tch -- --noplot` (add a filter such as `projection`).
+
+use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use phi_core::fields::{
+    Boundary, CenteredGrid, Domain, PointCloud, ProjectionMasks, StaggeredGrid, Transfer,
+    particles_to_staggered, pressure_projection, sample_staggered,
+};
+use phi_core::solve::{Preconditioner, SolveMethod, SolveOptions};
+use phi_core::{Backend, Tensor};
+
+fn domain(res: &[usize]) -> Domain {
+    let upper: Vec<f32> = res.iter().map(|&n| n as f32).collect();
+    Domain::new(
+        res,
+        &vec![0.0; res.len()],
+        &upper,
+        &vec![[Boundary::Closed; 2]; res.len()],
+    )
+    .expect("a valid domain")
+}
+
+fn bench_backend<B: Backend>(c: &mut Criterion) {
+    let device = B::default_device();
+    let name = B::name();
+    for res in [
+        vec![32usize, 32],
+        vec![64, 64],
+        vec![128, 128],
+        vec![64, 64, 64],
+    ] {
+        let domain = domain(&res);
+        let d = res.len();
+        let top = res[d - 1] as f32 / 2.0;
+        let liquid = CenteredGrid::<B>::from_fn(&domain, 1, &device, |x| {
+            vec![if x[d - 1] < top { 1.0 } else { 0.0 }]
+        })
+        .expect("a mask");
+        let velocity = StaggeredGrid::<B>::from_fn(&domain, &device, |axis, x| {
+            ((axis as f32 + 1.0) * 0.37 * x.iter().sum::<f32>()).sin()
+        })
+        .expect("a field");
+        let label = res
+            .iter()
+            .map(|n| n.to_string())
+            .collect::<Vec<_>>()
+            .join("x");
+        let options = SolveOptions::default();
+        c.bench_with_input(
+            BenchmarkId::new(format!("projection {label}"), name),
+            &(),
+            |b, _| {
+                b.iter(|| {
+                    let p =
+                        pressure_projection(&velocity, ProjectionMasks::liquid(&liquid), &options)
+                            .expect("the solve converges");
+                    std::hint::black_box(
+                        p.velocity
+                            .component(0)
+                            .narrow(0, 0..1)
+                            .expect("a row")
+                            .to_vec(),
+                    )
+                })
+            },
+        );
+    }
+
+    let domain = domain(&[64, 64]);
+    for n in [10_000usize, 100_000] {
+        let positions = Tensor::<B>::random_uniform(&[n, 2], 0.0, 64.0, 1, &device);
+        let velocities = Tensor::<B>::random_uniform(&[n, 2], -1.0, 1.0, 2, &device);
+        let cloud = PointCloud::new(positions.clone(), velocities).expect("a cloud");
+        let (grid, _) = particles_to_staggered(&cloud, &domain, Transfer::Linear).expect("p2g");
+        c.bench_with_input(
+            BenchmarkId::new(format!("particles to grid {n}"), name),
+            &(),
+            |b, _| {
+                b.iter(|| {
+                    let (g, _) =
+                        particles_to_staggered(&cloud, &domain, Transfer::Linear).expect("p2g");
+                    std::hint::black_box(g.component(0).narrow(0, 0..1).expect("a row").to_vec())
+                })
+            },
+        );
+        c.bench_with_input(
+            BenchmarkId::new(format!("grid to particles {n}"), name),
+            &(),
+            |b, _| {
+                b.iter(|| {
+                    let v = sample_staggered(&grid, &positions).expect("g2p");
+                    std::hint::black_box(v.narrow(0, 0..1).expect("a row").to_vec())
+                })
+            },
+        );
+    }
+}
+
+fn benches(c: &mut Criterion) {
+    #[cfg(feature = "ndarray")]
+    bench_backend::<phi_core::backend::ndarray::NdArray>(c);
+    #[cfg(feature = "burn")]
+    bench_backend::<phi_core::backend::burn::Burn>(c);
+    #[cfg(feature = "tch")]
+    bench_backend::<phi_core::backend::tch::Tch>(c);
+}
+
+criterion_group! {
+    name = fields;
+    config = Criterion::default().sample_size(10).measurement_time(std::time::Duration::from_secs(3));
+    targets = benches
+}
+criterion_main!(fields);

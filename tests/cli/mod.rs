@@ -1,0 +1,110 @@
+//! The `phi` command line: `phi simulate` end to end, and its errors.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use phi::output::read_npz;
+
+fn phi() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_phi"))
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("phi-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn simulate_writes_trajectory_frames_and_gif() {
+    let dir = scratch("simulate");
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/small32.toml");
+    let out = dir.join("run");
+    let output = phi()
+        .args(["simulate", scene, "--out"])
+        .arg(&out)
+        .args([
+            "--steps",
+            "6",
+            "--frame-every",
+            "3",
+            "--checkpoint-every",
+            "2",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(stdout.contains("6 steps of 1024 particles"), "{stdout}");
+    let arrays = read_npz(out.join("trajectory.npz")).unwrap();
+    let get = |k: &str| {
+        arrays
+            .iter()
+            .find(|(n, _)| n == k)
+            .map(|(_, a)| a.clone())
+            .unwrap()
+    };
+    assert_eq!(get("positions").shape, vec![7, 1024, 2]);
+    assert_eq!(get("velocities").shape, vec![7, 1024, 2]);
+    assert_eq!(get("steps_completed").as_i64().unwrap(), &[6]);
+    let positions = get("positions");
+    let p = positions.as_f32().unwrap();
+    assert!(p.iter().all(|x| x.is_finite() && (0.0..=32.0).contains(x)));
+    // Frames 0, 3 and 6.
+    for step in [0, 3, 6] {
+        assert!(out.join(format!("frames/frame_{step:05}.png")).is_file());
+    }
+    assert!(out.join("simulation.gif").is_file());
+    let run: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
+    assert_eq!(run["complete"], true);
+    assert_eq!(run["steps"], 6);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn bad_scenes_exit_nonzero_naming_file_and_key() {
+    let dir = scratch("bad");
+    let scene = dir.join("bad.toml");
+    std::fs::write(
+        &scene,
+        "[domain]\nresolution = [32, 32]\n[simulation]\ndt = 0.0\nsteps = 5\n\
+         [[liquid]]\ngeometry = { type = \"box\", lower = [0, 0], upper = [32, 4] }\n",
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let output = phi()
+        .arg("simulate")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("bad.toml") && stderr.contains("simulation.dt"),
+        "{stderr}"
+    );
+    assert!(!out.exists(), "a failed scene left output behind");
+
+    let output = phi()
+        .args([
+            "simulate",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/small32.toml"),
+            "--device",
+            "cuda",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains("cuda"));
+    let _ = std::fs::remove_dir_all(dir);
+}
