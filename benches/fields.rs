@@ -49,11 +49,21 @@ fn bench_backend<B: Backend>(c: &mut Criterion) {
             .map(|n| n.to_string())
             .collect::<Vec<_>>()
             .join("x");
-        let options = SolveOptions::default();
-        c.bench_with_input(
-            BenchmarkId::new(format!("projection {label}"), name),
-            &(),
-            |b, _| {
+        // The solve is the same host code on every backend: compare its methods on ndarray.
+        let mut methods = vec![("", SolveMethod::Auto)];
+        if name == "ndarray" {
+            methods.push((
+                " cg-ic0",
+                SolveMethod::ConjugateGradient(Preconditioner::IncompleteCholesky),
+            ));
+            if d == 2 {
+                methods.push((" cholesky", SolveMethod::Cholesky));
+            }
+        }
+        for (suffix, method) in methods {
+            let options = SolveOptions::with_method(method);
+            let id = BenchmarkId::new(format!("projection {label}{suffix}"), name);
+            c.bench_with_input(id, &(), |b, _| {
                 b.iter(|| {
                     let p =
                         pressure_projection(&velocity, ProjectionMasks::liquid(&liquid), &options)
@@ -66,8 +76,8 @@ fn bench_backend<B: Backend>(c: &mut Criterion) {
                             .to_vec(),
                     )
                 })
-            },
-        );
+            });
+        }
     }
 
     let domain = domain(&[64, 64]);

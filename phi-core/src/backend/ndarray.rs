@@ -443,6 +443,15 @@ impl Backend for NdArray {
         for (point, row) in p.chunks_exact(d).zip(out.chunks_exact_mut(c)) {
             indexer.linear(point, &mut base, &mut fraction);
             let flat: usize = base.iter().zip(&indexer.strides).map(|(b, s)| b * s).sum();
+            if c == 1 {
+                let mut sum = 0.0f32;
+                for corner in 0..1usize << d {
+                    let (offset, weight) = indexer.corner(corner, &fraction);
+                    sum += v[flat + offset] * weight;
+                }
+                row[0] = sum;
+                continue;
+            }
             for corner in 0..1usize << d {
                 let (offset, weight) = indexer.corner(corner, &fraction);
                 let sample = &v[(flat + offset) * c..(flat + offset + 1) * c];
@@ -837,6 +846,7 @@ impl LatticeIndexer {
         }
     }
 
+    #[inline(always)]
     fn continuous(&self, x: f32, axis: usize) -> f32 {
         ((x - self.origin[axis]) * self.inverse_spacing[axis])
             .max(0.0)
@@ -844,10 +854,12 @@ impl LatticeIndexer {
     }
 
     /// The lower corner and the fractions of `point`.
+    #[inline(always)]
     fn linear(&self, point: &[f32], base: &mut [usize], fraction: &mut [f32]) {
         for (axis, &x) in point.iter().enumerate() {
             let t = self.continuous(x, axis);
-            let b = t.floor().min(self.highest_base[axis]);
+            // `t ≥ 0` (clamped, and NaN became 0), so truncation is the floor, without a libm call.
+            let b = (t as u32 as f32).min(self.highest_base[axis]);
             base[axis] = b as usize;
             fraction[axis] = t - b;
         }
@@ -864,6 +876,7 @@ impl LatticeIndexer {
 
     /// The flat offset from the lower corner and the weight of `corner` (bit `d − 1 − axis` set:
     /// the upper sample along `axis`).
+    #[inline(always)]
     fn corner(&self, corner: usize, fraction: &[f32]) -> (usize, f32) {
         let d = fraction.len();
         let mut offset = 0;

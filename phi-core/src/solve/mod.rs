@@ -26,7 +26,8 @@
 //! Factorizations and preconditioners are cached in the matrix, so the adjoint solve of a
 //! backward pass (and any later solve with the same matrix) reuses them. The switch between the
 //! two is a fill-in heuristic (factor entries ≤ 12 × matrix entries, from faer's symbolic
-//! analysis); `tests::solve_timings` (ignored, run by hand) times both on 32², 64², 128² and 64³
+//! analysis), skipped for matrices with more than 5.5 entries per row (3-d stencils), which always
+//! go to conjugate gradients; `tests::solve_timings` (ignored, run by hand) times both on 32², 64², 128² and 64³
 //! Poisson matrices to calibrate it.
 
 mod native;

@@ -207,6 +207,11 @@ fn resolve_method(matrix: &SparseMatrix, requested: SolveMethod) -> SolveMethod 
     if !matrix.is_symmetric() {
         return SolveMethod::Lu;
     }
+    // More than 5.5 entries per row is a 3-d stencil (7 points; 2-d has 5): its factor fills in
+    // far beyond the limit, so skip the symbolic analysis, which alone costs more than the solve.
+    if matrix.nnz() as f64 > 5.5 * matrix.nrows().max(1) as f64 {
+        return SolveMethod::ConjugateGradient(Preconditioner::IncompleteCholesky);
+    }
     let fill = *matrix.cholesky_fill.get_or_init(|| {
         let entries = lower_triplets(matrix, true);
         let a = SparseColMat::<usize, f64>::try_new_from_triplets(
