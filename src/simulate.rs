@@ -152,13 +152,22 @@ pub fn simulate<B: Backend>(scene: &Scene, options: &SimulateOptions) -> Result<
             solid.clone()
         };
         let kinds = vec![KIND_LIQUID; host.len() / d];
-        let (view, lower, upper, res, mask) = side_view(host, d, sim.domain(), &solid_now);
-        let image = render_frame(&view, d, &kinds, &lower, &upper, &res, Some(&mask), &style)?;
+        let view = side_view(host, d, sim.domain(), &solid_now);
+        let image = render_frame(
+            &view.positions,
+            d,
+            &kinds,
+            &view.lower,
+            &view.upper,
+            &view.resolution,
+            Some(&view.solid),
+            &style,
+        )?;
         let path = frames_dir.join(format!("frame_{step:05}.png"));
         write_png(&path, &image)?;
         if gif.is_none() {
             *gif = Some(GifWriter::create(
-                &out.join("simulation.gif"),
+                out.join("simulation.gif"),
                 image.width,
                 image.height,
                 5,
@@ -290,8 +299,18 @@ fn write_trajectory(out: &Path, history: &[(Vec<f32>, Vec<f32>)], d: usize, dt: 
         ),
     ];
     let refs: Vec<(&str, &NpyArray)> = arrays.iter().map(|(k, a)| (*k, a)).collect();
-    write_npz(&out.join("trajectory.npz"), &refs)?;
+    write_npz(out.join("trajectory.npz"), &refs)?;
     Ok(())
+}
+
+/// Particles and grid as the renderer sees them: positions, lower and upper bounds, resolution
+/// and solid cells.
+struct View {
+    positions: Vec<f32>,
+    lower: Vec<f32>,
+    upper: Vec<f32>,
+    resolution: Vec<usize>,
+    solid: Vec<bool>,
 }
 
 /// What the frames show: 2D as it is; 3D seen from the side (horizontal axis x, vertical axis
@@ -302,16 +321,16 @@ fn side_view(
     d: usize,
     domain: &phi_core::fields::Domain,
     solid: &[bool],
-) -> (Vec<f32>, Vec<f32>, Vec<f32>, Vec<usize>, Vec<bool>) {
+) -> View {
     let (lower, upper, res) = (domain.lower(), domain.upper(), domain.resolution());
     if d != 3 {
-        return (
-            positions.to_vec(),
-            lower.to_vec(),
-            upper.to_vec(),
-            res.to_vec(),
-            solid.to_vec(),
-        );
+        return View {
+            positions: positions.to_vec(),
+            lower: lower.to_vec(),
+            upper: upper.to_vec(),
+            resolution: res.to_vec(),
+            solid: solid.to_vec(),
+        };
     }
     let order = [0usize, 2, 1];
     let view = positions
@@ -328,7 +347,13 @@ fn side_view(
             }
         }
     }
-    (view, permute_f(lower), permute_f(upper), new_res, mask)
+    View {
+        positions: view,
+        lower: permute_f(lower),
+        upper: permute_f(upper),
+        resolution: new_res,
+        solid: mask,
+    }
 }
 
 /// Refuses an output directory that is a file.

@@ -25,10 +25,9 @@
 //! otherwise (3-d grids, whose factors fill in heavily); LU for matrices that are not symmetric.
 //! Factorizations and preconditioners are cached in the matrix, so the adjoint solve of a
 //! backward pass (and any later solve with the same matrix) reuses them. The switch between the
-//! two is a fill-in heuristic (factor entries ≤ 12 × matrix entries, from faer's symbolic
-//! analysis), skipped for matrices with more than 5.5 entries per row (3-d stencils), which always
-//! go to conjugate gradients; `tests::solve_timings` (ignored, run by hand) times both on 32², 64², 128² and 64³
-//! Poisson matrices to calibrate it.
+//! two is structural: up to 5.5 entries per row (1-d and 2-d stencils) factorise, more (3-d
+//! stencils) iterate, which `benches/fields.rs` (projection with each method) supports at 32²,
+//! 64², 128² and 64³.
 
 mod native;
 mod poisson;
@@ -45,9 +44,9 @@ use crate::error::TensorError;
 /// How to solve a system.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum SolveMethod {
-    /// Sparse Cholesky for a symmetric matrix whose factor stays within a fill budget (2-d
-    /// grids), incomplete-Cholesky conjugate gradients for other symmetric matrices (3-d grids),
-    /// LU for a matrix that is not symmetric.
+    /// Sparse Cholesky for a symmetric matrix with at most 5.5 entries per row (1-d and 2-d
+    /// stencils), incomplete-Cholesky conjugate gradients for other symmetric matrices (3-d
+    /// stencils), LU for a matrix that is not symmetric.
     #[default]
     Auto,
     /// Conjugate gradients with a preconditioner; the matrix must be symmetric positive

@@ -24,7 +24,6 @@ pub struct SparseMatrix {
     pub(super) cholesky: OnceLock<Result<Arc<CholeskyFactor>, SolveError>>,
     pub(super) lu: OnceLock<Result<Arc<LuFactor>, SolveError>>,
     pub(super) ic0: OnceLock<Option<Arc<IncompleteCholesky>>>,
-    pub(super) cholesky_fill: OnceLock<Option<usize>>,
     solves: AtomicUsize,
     factorizations: AtomicUsize,
 }
@@ -82,7 +81,6 @@ impl SparseMatrix {
             cholesky: OnceLock::new(),
             lu: OnceLock::new(),
             ic0: OnceLock::new(),
-            cholesky_fill: OnceLock::new(),
             solves: AtomicUsize::new(0),
             factorizations: AtomicUsize::new(0),
         }
