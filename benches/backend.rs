@@ -3,6 +3,9 @@
 //!
 //! `cargo bench --bench backend --features tch` (add `-- matmul` etc. to filter).
 
+mod common;
+
+use common::force;
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use phi_core::{Backend, IntTensor, Tensor};
 
@@ -43,18 +46,8 @@ fn bench_backend<B: Backend>(c: &mut Criterion) {
     );
 }
 
-/// Makes sure lazy or asynchronous backends finish the work: reads one element back.
-fn force<B: Backend>(t: &Tensor<B>) {
-    std::hint::black_box(t.narrow(0, 0..1).unwrap().to_vec());
-}
-
 fn benches(c: &mut Criterion) {
-    #[cfg(feature = "ndarray")]
-    bench_backend::<phi_core::backend::ndarray::NdArray>(c);
-    #[cfg(feature = "burn")]
-    bench_backend::<phi_core::backend::burn::Burn>(c);
-    #[cfg(feature = "tch")]
-    bench_backend::<phi_core::backend::tch::Tch>(c);
+    common::on_every_backend!(c, bench_backend);
 }
 
 criterion_group! {

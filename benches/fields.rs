@@ -5,6 +5,8 @@
 //!
 //! `cargo bench --bench fields --features tch -- --noplot` (add a filter such as `projection`).
 
+mod common;
+
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use phi_core::fields::{
     Boundary, CenteredGrid, Domain, PointCloud, ProjectionMasks, StaggeredGrid, Transfer,
@@ -68,13 +70,7 @@ fn bench_backend<B: Backend>(c: &mut Criterion) {
                     let p =
                         pressure_projection(&velocity, ProjectionMasks::liquid(&liquid), &options)
                             .expect("the solve converges");
-                    std::hint::black_box(
-                        p.velocity
-                            .component(0)
-                            .narrow(0, 0..1)
-                            .expect("a row")
-                            .to_vec(),
-                    )
+                    common::force(p.velocity.component(0))
                 })
             });
         }
@@ -93,7 +89,7 @@ fn bench_backend<B: Backend>(c: &mut Criterion) {
                 b.iter(|| {
                     let (g, _) =
                         particles_to_staggered(&cloud, &domain, Transfer::Linear).expect("p2g");
-                    std::hint::black_box(g.component(0).narrow(0, 0..1).expect("a row").to_vec())
+                    common::force(g.component(0))
                 })
             },
         );
@@ -103,7 +99,7 @@ fn bench_backend<B: Backend>(c: &mut Criterion) {
             |b, _| {
                 b.iter(|| {
                     let v = sample_staggered(&grid, &positions).expect("g2p");
-                    std::hint::black_box(v.narrow(0, 0..1).expect("a row").to_vec())
+                    common::force(&v)
                 })
             },
         );
@@ -111,12 +107,7 @@ fn bench_backend<B: Backend>(c: &mut Criterion) {
 }
 
 fn benches(c: &mut Criterion) {
-    #[cfg(feature = "ndarray")]
-    bench_backend::<phi_core::backend::ndarray::NdArray>(c);
-    #[cfg(feature = "burn")]
-    bench_backend::<phi_core::backend::burn::Burn>(c);
-    #[cfg(feature = "tch")]
-    bench_backend::<phi_core::backend::tch::Tch>(c);
+    common::on_every_backend!(c, bench_backend);
 }
 
 criterion_group! {

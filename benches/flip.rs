@@ -5,6 +5,8 @@
 //! `cargo bench --bench flip --features tch -- --noplot`; single-threaded numbers with
 //! `RAYON_NUM_THREADS=1`.
 
+mod common;
+
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use phi_core::Backend;
 use phi_flip::Scene;
@@ -27,7 +29,7 @@ fn bench_backend<B: Backend>(c: &mut Criterion) {
             |b, _| {
                 b.iter(|| {
                     let (next, _) = sim.step(&particles, 20).expect("a step");
-                    std::hint::black_box(next.positions.narrow(0, 0..1).expect("a row").to_vec())
+                    common::force(&next.positions)
                 })
             },
         );
@@ -35,12 +37,7 @@ fn bench_backend<B: Backend>(c: &mut Criterion) {
 }
 
 fn benches(c: &mut Criterion) {
-    #[cfg(feature = "ndarray")]
-    bench_backend::<phi_core::backend::ndarray::NdArray>(c);
-    #[cfg(feature = "burn")]
-    bench_backend::<phi_core::backend::burn::Burn>(c);
-    #[cfg(feature = "tch")]
-    bench_backend::<phi_core::backend::tch::Tch>(c);
+    common::on_every_backend!(c, bench_backend);
 }
 
 criterion_group! {

@@ -171,6 +171,15 @@ struct ObstacleMasks<B: Backend> {
 /// particles advected by RK4 through it; particles pushed out of obstacles and back into the
 /// domain. Inflows emit before a step.
 ///
+/// # Beside Φ_Flow 2.1.4
+/// The same algorithm, with these differences (all deliberate): the default transfer is the
+/// tent-weighted one (differentiable; `Transfer::NearestFace` is Φ_Flow's, though it rounds ties
+/// up where NumPy rounds half to even); gravity is added on every face, not only on occupied ones;
+/// the FLIP/PIC update and the advection read velocities extrapolated from the faces that received
+/// particle weight after the projection; RK4 uses one extrapolation that covers the step's reach
+/// (`⌈max|u| Δt / Δx⌉ + 2` layers) instead of one per stage; particles pushed out of obstacles land
+/// on the surface plus `push_offset` (0 by default, as in the thesis code; Φ_Flow uses 0.5).
+///
 /// # What is differentiable
 /// The step is built from tensor operations: on an autodiff backend, gradients flow from any
 /// later particle state to earlier positions and velocities and to the gravity. Held constant, as
