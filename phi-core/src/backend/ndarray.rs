@@ -438,6 +438,13 @@ impl Backend for NdArray {
         let (v, p) = (standard(&values), standard(&points));
         let indexer = LatticeIndexer::new(lattice);
         let mut out = vec![0.0f32; n * c];
+        if c == 1 && (d == 2 || d == 3) {
+            match d {
+                2 => sample_scalar::<2>(&indexer, &v, &p, &mut out),
+                _ => sample_scalar::<3>(&indexer, &v, &p, &mut out),
+            }
+            return Ok(from_vec(out, &[n, c]));
+        }
         let mut base = vec![0usize; d];
         let mut fraction = vec![0.0f32; d];
         for (point, row) in p.chunks_exact(d).zip(out.chunks_exact_mut(c)) {
@@ -489,6 +496,10 @@ impl Backend for NdArray {
                     weights[flat] += 1.0;
                 }
             }
+            Transfer::Linear if c == 1 && (d == 2 || d == 3) => match d {
+                2 => splat_scalar::<2>(&indexer, &v, &p, &mut sums, &mut weights),
+                _ => splat_scalar::<3>(&indexer, &v, &p, &mut sums, &mut weights),
+            },
             Transfer::Linear => {
                 // Corner-major, as the composite scatter adds, so that the sums round the same.
                 let mut flats = Vec::with_capacity(n);
@@ -890,6 +901,84 @@ impl LatticeIndexer {
             weight = if axis == 0 { factor } else { weight * factor };
         }
         (offset, weight)
+    }
+}
+
+/// The flat offset of each corner from the lower corner (independent of the point).
+fn corner_offsets<const D: usize>(indexer: &LatticeIndexer) -> [usize; 8] {
+    let mut offsets = [0usize; 8];
+    for (corner, offset) in offsets.iter_mut().enumerate().take(1 << D) {
+        for axis in 0..D {
+            if (corner >> (D - 1 - axis)) & 1 == 1 && indexer.shape[axis] > 1 {
+                *offset += indexer.strides[axis];
+            }
+        }
+    }
+    offsets
+}
+
+/// The flat lower corner and the fractions of `point`, for a `D`-dimensional lattice.
+#[inline(always)]
+fn lower_corner<const D: usize>(indexer: &LatticeIndexer, point: &[f32]) -> (usize, [f32; D]) {
+    let mut flat = 0;
+    let mut fraction = [0.0f32; D];
+    for axis in 0..D {
+        let t = indexer.continuous(point[axis], axis);
+        let b = (t as u32 as f32).min(indexer.highest_base[axis]);
+        flat += b as usize * indexer.strides[axis];
+        fraction[axis] = t - b;
+    }
+    (flat, fraction)
+}
+
+/// The tent weight of `corner`, multiplied in axis order as the composite does.
+#[inline(always)]
+fn corner_weight<const D: usize>(corner: usize, fraction: &[f32; D]) -> f32 {
+    let mut weight = 1.0f32;
+    for (axis, &f) in fraction.iter().enumerate() {
+        let factor = if (corner >> (D - 1 - axis)) & 1 == 1 {
+            f
+        } else {
+            1.0 - f
+        };
+        weight = if axis == 0 { factor } else { weight * factor };
+    }
+    weight
+}
+
+/// [`Backend::float_lattice_sample`] of one channel on a `D`-dimensional lattice.
+fn sample_scalar<const D: usize>(indexer: &LatticeIndexer, v: &[f32], p: &[f32], out: &mut [f32]) {
+    let offsets = corner_offsets::<D>(indexer);
+    for (point, o) in p.chunks_exact(D).zip(out.iter_mut()) {
+        let (flat, fraction) = lower_corner::<D>(indexer, point);
+        let mut sum = 0.0f32;
+        for (corner, &offset) in offsets.iter().enumerate().take(1 << D) {
+            sum += v[flat + offset] * corner_weight::<D>(corner, &fraction);
+        }
+        *o = sum;
+    }
+}
+
+/// [`Backend::float_lattice_splat`] (tent weights) of one channel on a `D`-dimensional lattice,
+/// corner-major like the composite scatter.
+fn splat_scalar<const D: usize>(
+    indexer: &LatticeIndexer,
+    v: &[f32],
+    p: &[f32],
+    sums: &mut [f32],
+    weights: &mut [f32],
+) {
+    let offsets = corner_offsets::<D>(indexer);
+    let stencils: Vec<(usize, [f32; D])> = p
+        .chunks_exact(D)
+        .map(|point| lower_corner::<D>(indexer, point))
+        .collect();
+    for (corner, &offset) in offsets.iter().enumerate().take(1 << D) {
+        for ((flat, fraction), &x) in stencils.iter().zip(v) {
+            let w = corner_weight::<D>(corner, fraction);
+            sums[flat + offset] += x * w;
+            weights[flat + offset] += w;
+        }
     }
 }
 
