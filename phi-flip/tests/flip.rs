@@ -480,3 +480,54 @@ fn backends_agree_over_ten_steps() {
         println!("{name}: agrees with ndarray to 1e-4 cells over 10 steps");
     }
 }
+
+/// 3D: a cube falls freely (the centre follows the discrete free fall, the shape is kept) and a
+/// pool under it stays at rest.
+#[test]
+fn three_dimensional_free_fall_over_a_still_pool() {
+    let (dt, g) = (0.05f32, 9.81f32);
+    let sim = simulation::<Nd>(&[10, 10, 20], dt, 1.0, vec![]);
+    let cube = boxed(&[3.0, 3.0, 12.0], &[7.0, 7.0, 16.0]);
+    let pool = boxed(&[0.0, 0.0, 0.0], &[10.0, 10.0, 3.0]);
+    let start = seed(&sim, &[cube, pool], Placement::Jittered);
+    let p0 = start.positions.to_vec();
+    let in_cube: Vec<bool> = p0.chunks(3).map(|q| q[2] > 6.0).collect();
+    let frames = run(&sim, start, 12);
+    let stats = |p: &[f32]| {
+        let (mut c, mut n, mut pool_moved) = ([0.0f32; 3], 0.0f32, 0.0f32);
+        for ((q, q0), &cube) in p.chunks(3).zip(p0.chunks(3)).zip(&in_cube) {
+            if cube {
+                for a in 0..3 {
+                    c[a] += q[a];
+                }
+                n += 1.0;
+            } else {
+                let moved = q
+                    .iter()
+                    .zip(q0)
+                    .map(|(x, y)| (x - y).abs())
+                    .fold(0.0f32, f32::max);
+                pool_moved = pool_moved.max(moved);
+            }
+        }
+        (c.map(|v| v / n), pool_moved)
+    };
+    let (c0, _) = stats(&p0);
+    for (n, frame) in frames.iter().enumerate() {
+        let (c, pool_moved) = stats(&frame.positions.to_vec());
+        let discrete = c0[2] - g * dt * dt * (n * (n + 1)) as f32 / 2.0;
+        assert!(
+            (c[2] - discrete).abs() < 2e-3,
+            "step {n}: centre z {} against {discrete}",
+            c[2]
+        );
+        assert!(
+            (c[0] - c0[0]).abs() < 1e-3 && (c[1] - c0[1]).abs() < 1e-3,
+            "step {n}: drift"
+        );
+        assert!(
+            pool_moved < 1e-3,
+            "step {n}: the pool moved {pool_moved} cells"
+        );
+    }
+}
