@@ -196,6 +196,8 @@ pub struct FlipSimulation<B: Backend> {
     device: B::Device,
     static_masks: Option<ObstacleMasks<B>>,
     obstacle_union: Option<Geometry>,
+    /// Whether the CFL warning was logged (once per simulation; later ones go to `debug`).
+    cfl_warned: std::sync::Arc<std::sync::atomic::AtomicBool>,
 }
 
 impl<B: Backend> FlipSimulation<B> {
@@ -255,6 +257,7 @@ impl<B: Backend> FlipSimulation<B> {
             device: device.clone(),
             static_masks: None,
             obstacle_union,
+            cfl_warned: Default::default(),
         };
         if !simulation.obstacles.iter().any(Obstacle::is_moving) {
             simulation.static_masks = Some(simulation.obstacle_masks(0.0)?);
@@ -506,12 +509,19 @@ impl<B: Backend> FlipSimulation<B> {
         let min_dx = domain.cell_size().into_iter().fold(f32::INFINITY, f32::min);
         let reach_cells = speed * dt / min_dx;
         if reach_cells > params.cfl_warning_cells {
-            tracing::warn!(
-                step,
-                cells = reach_cells,
-                "the grid velocity moves particles {reach_cells:.1} cells in one step (CFL); \
-                 consider a smaller dt"
-            );
+            let first = !self
+                .cfl_warned
+                .swap(true, std::sync::atomic::Ordering::Relaxed);
+            if first {
+                tracing::warn!(
+                    step,
+                    "the grid velocity moves particles {reach_cells:.1} cells in one step (CFL \
+                     limit {} cells); consider a smaller dt (later steps are logged at debug level)",
+                    params.cfl_warning_cells
+                );
+            } else {
+                tracing::debug!(step, cells = reach_cells, "CFL limit exceeded");
+            }
         }
         let layers = (reach_cells.ceil() as usize + 2)
             .min(domain.resolution().iter().copied().max().unwrap_or(1));
