@@ -10,6 +10,7 @@
 //!   is written.
 //! - `frames/frame_NNNNN.png` and `simulation.gif` (written frame by frame).
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -20,7 +21,8 @@ use phi_flip::{Particles, Scene};
 use serde::Serialize;
 
 use crate::output::{
-    ArrayData, FrameStyle, GifWriter, KIND_LIQUID, NpyArray, render_frame, write_npz, write_png,
+    ArrayData, FrameStyle, GifWriter, KIND_LIQUID, NpyArray, OutputError, render_frame,
+    write_atomic, write_npz, write_png,
 };
 
 /// How to run and what to write.
@@ -59,7 +61,7 @@ pub struct RunSummary {
     pub solver_iterations_mean: f64,
     /// Largest iteration count.
     pub solver_iterations_max: usize,
-    /// Largest relative residual is not tracked; the largest absolute residual of the solves.
+    /// The largest absolute residual `‖b − A x‖₂` of the pressure solves.
     pub solver_residual_max: f64,
     /// The largest per-step particle displacement, in cells.
     pub max_displacement_cells: f32,
@@ -246,19 +248,11 @@ fn write_run_file(
         summary,
     };
     let text = serde_json::to_string_pretty(&file)?;
-    atomic_write(&out.join("run.json"), text.as_bytes())
-}
-
-/// Writes `bytes` to `path` through a temporary file and a rename.
-pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<()> {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = path.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
-    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path)
-        .with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))?;
+    let path = out.join("run.json");
+    write_atomic(&path, |w| {
+        w.write_all(text.as_bytes())
+            .map_err(|e| OutputError::io(&path, "cannot write", e))
+    })?;
     Ok(())
 }
 

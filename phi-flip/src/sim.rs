@@ -5,7 +5,7 @@ use phi_core::fields::{
     CenteredGrid, Domain, PointCloud, ProjectionMasks, StaggeredGrid, Transfer, extrapolate_valid,
     occupied_cells, particles_to_staggered, pressure_projection, sample_staggered, valid_faces,
 };
-use phi_core::solve::{Preconditioner, SolveMethod, SolveOptions, SolveStats};
+use phi_core::solve::{SolveOptions, SolveStats};
 use phi_core::{Tensor, TensorError};
 use phi_geom::{Geometry, Obstacle, PushDirection};
 
@@ -25,7 +25,9 @@ pub struct FlipParams {
     /// Particle → grid transfer: tent weights (differentiable, the default) or Φ_Flow's
     /// nearest-face mean.
     pub transfer: Transfer,
-    /// Pressure solve options (default: relative tolerance `1e-5`, at most 1000 iterations).
+    /// Pressure solve options (default: relative tolerance `1e-5`, at most 1000 iterations, the
+    /// method chosen by [`SolveMethod::Auto`](phi_core::solve::SolveMethod::Auto): Cholesky in 2D,
+    /// IC(0)-preconditioned CG in 3D).
     pub solve: SolveOptions,
     /// How far beyond an obstacle's surface pushed particles are placed (domain units; the
     /// thesis code uses 0).
@@ -47,9 +49,7 @@ impl FlipParams {
             gravity,
             flip_ratio: 1.0,
             transfer: Transfer::Linear,
-            solve: SolveOptions::with_method(SolveMethod::ConjugateGradient(
-                Preconditioner::IncompleteCholesky,
-            )),
+            solve: SolveOptions::default(),
             push_offset: 0.0,
             cfl_warning_cells: 3.0,
         }

@@ -434,38 +434,13 @@ impl Backend for NdArray {
     ) -> Result<Self::Float> {
         let c = values.shape()[1];
         let n = points.shape()[0];
-        let d = lattice.shape.len();
         let (v, p) = (standard(&values), standard(&points));
         let indexer = LatticeIndexer::new(lattice);
         let mut out = vec![0.0f32; n * c];
-        if c == 1 && (d == 2 || d == 3) {
-            match d {
-                2 => sample_scalar::<2>(&indexer, &v, &p, &mut out),
-                _ => sample_scalar::<3>(&indexer, &v, &p, &mut out),
-            }
-            return Ok(from_vec(out, &[n, c]));
-        }
-        let mut base = vec![0usize; d];
-        let mut fraction = vec![0.0f32; d];
-        for (point, row) in p.chunks_exact(d).zip(out.chunks_exact_mut(c)) {
-            indexer.linear(point, &mut base, &mut fraction);
-            let flat: usize = base.iter().zip(&indexer.strides).map(|(b, s)| b * s).sum();
-            if c == 1 {
-                let mut sum = 0.0f32;
-                for corner in 0..1usize << d {
-                    let (offset, weight) = indexer.corner(corner, &fraction);
-                    sum += v[flat + offset] * weight;
-                }
-                row[0] = sum;
-                continue;
-            }
-            for corner in 0..1usize << d {
-                let (offset, weight) = indexer.corner(corner, &fraction);
-                let sample = &v[(flat + offset) * c..(flat + offset + 1) * c];
-                for (o, &x) in row.iter_mut().zip(sample) {
-                    *o += x * weight;
-                }
-            }
+        match lattice.shape.len() {
+            1 => sample_kernel::<1>(&indexer, &v, &p, c, &mut out),
+            2 => sample_kernel::<2>(&indexer, &v, &p, c, &mut out),
+            _ => sample_kernel::<3>(&indexer, &v, &p, c, &mut out),
         }
         Ok(from_vec(out, &[n, c]))
     }
@@ -477,58 +452,16 @@ impl Backend for NdArray {
         transfer: Transfer,
     ) -> Result<(Self::Float, Self::Float)> {
         let c = values.shape()[1];
-        let n = points.shape()[0];
-        let d = lattice.shape.len();
         let samples: usize = lattice.shape.iter().product();
         let (v, p) = (standard(&values), standard(&points));
         let indexer = LatticeIndexer::new(lattice);
         let mut sums = vec![0.0f32; samples * c];
         let mut weights = vec![0.0f32; samples];
-        match transfer {
-            Transfer::NearestFace => {
-                let mut index = vec![0usize; d];
-                for (point, value) in p.chunks_exact(d).zip(v.chunks_exact(c)) {
-                    indexer.nearest(point, &mut index);
-                    let flat: usize = index.iter().zip(&indexer.strides).map(|(b, s)| b * s).sum();
-                    for (s, &x) in sums[flat * c..(flat + 1) * c].iter_mut().zip(value) {
-                        *s += x;
-                    }
-                    weights[flat] += 1.0;
-                }
-            }
-            Transfer::Linear if c == 1 && (d == 2 || d == 3) => match d {
-                2 => splat_scalar::<2>(&indexer, &v, &p, &mut sums, &mut weights),
-                _ => splat_scalar::<3>(&indexer, &v, &p, &mut sums, &mut weights),
-            },
-            Transfer::Linear => {
-                // Corner-major, as the composite scatter adds, so that the sums round the same.
-                let mut flats = Vec::with_capacity(n);
-                let mut fractions = vec![0.0f32; n * d];
-                let mut base = vec![0usize; d];
-                for (point, fraction) in p.chunks_exact(d).zip(fractions.chunks_exact_mut(d)) {
-                    indexer.linear(point, &mut base, fraction);
-                    flats.push(
-                        base.iter()
-                            .zip(&indexer.strides)
-                            .map(|(b, s)| b * s)
-                            .sum::<usize>(),
-                    );
-                }
-                for corner in 0..1usize << d {
-                    for ((&flat, fraction), value) in flats
-                        .iter()
-                        .zip(fractions.chunks_exact(d))
-                        .zip(v.chunks_exact(c))
-                    {
-                        let (offset, weight) = indexer.corner(corner, fraction);
-                        let at = flat + offset;
-                        for (s, &x) in sums[at * c..(at + 1) * c].iter_mut().zip(value) {
-                            *s += x * weight;
-                        }
-                        weights[at] += weight;
-                    }
-                }
-            }
+        let out = (&mut sums[..], &mut weights[..]);
+        match lattice.shape.len() {
+            1 => splat_kernel::<1>(&indexer, &v, &p, c, transfer, out),
+            2 => splat_kernel::<2>(&indexer, &v, &p, c, transfer, out),
+            _ => splat_kernel::<3>(&indexer, &v, &p, c, transfer, out),
         }
         Ok((
             from_vec(sums, &[samples, c]),
@@ -863,45 +796,6 @@ impl LatticeIndexer {
             .max(0.0)
             .min(self.upper[axis])
     }
-
-    /// The lower corner and the fractions of `point`.
-    #[inline(always)]
-    fn linear(&self, point: &[f32], base: &mut [usize], fraction: &mut [f32]) {
-        for (axis, &x) in point.iter().enumerate() {
-            let t = self.continuous(x, axis);
-            // `t ≥ 0` (clamped, and NaN became 0), so truncation is the floor, without a libm call.
-            let b = (t as u32 as f32).min(self.highest_base[axis]);
-            base[axis] = b as usize;
-            fraction[axis] = t - b;
-        }
-    }
-
-    /// The nearest sample of `point`.
-    fn nearest(&self, point: &[f32], index: &mut [usize]) {
-        for (axis, &x) in point.iter().enumerate() {
-            index[axis] = (self.continuous(x, axis) + 0.5)
-                .floor()
-                .min(self.upper[axis]) as usize;
-        }
-    }
-
-    /// The flat offset from the lower corner and the weight of `corner` (bit `d − 1 − axis` set:
-    /// the upper sample along `axis`).
-    #[inline(always)]
-    fn corner(&self, corner: usize, fraction: &[f32]) -> (usize, f32) {
-        let d = fraction.len();
-        let mut offset = 0;
-        let mut weight = 1.0f32;
-        for (axis, &f) in fraction.iter().enumerate() {
-            let upper = (corner >> (d - 1 - axis)) & 1 == 1;
-            if upper && self.shape[axis] > 1 {
-                offset += self.strides[axis];
-            }
-            let factor = if upper { f } else { 1.0 - f };
-            weight = if axis == 0 { factor } else { weight * factor };
-        }
-        (offset, weight)
-    }
 }
 
 /// The flat offset of each corner from the lower corner (independent of the point).
@@ -946,40 +840,75 @@ fn corner_weight<const D: usize>(corner: usize, fraction: &[f32; D]) -> f32 {
     weight
 }
 
-/// [`Backend::float_lattice_sample`] of one channel on a `D`-dimensional lattice.
-fn sample_scalar<const D: usize>(indexer: &LatticeIndexer, v: &[f32], p: &[f32], out: &mut [f32]) {
-    let offsets = corner_offsets::<D>(indexer);
-    for (point, o) in p.chunks_exact(D).zip(out.iter_mut()) {
-        let (flat, fraction) = lower_corner::<D>(indexer, point);
-        let mut sum = 0.0f32;
-        for (corner, &offset) in offsets.iter().enumerate().take(1 << D) {
-            sum += v[flat + offset] * corner_weight::<D>(corner, &fraction);
-        }
-        *o = sum;
-    }
-}
-
-/// [`Backend::float_lattice_splat`] (tent weights) of one channel on a `D`-dimensional lattice,
-/// corner-major like the composite scatter.
-fn splat_scalar<const D: usize>(
+/// [`Backend::float_lattice_sample`] on a `D`-dimensional lattice: `out [N, c]` from values
+/// `v [samples, c]` at points `p [N, D]`, corners summed in the composite's order.
+fn sample_kernel<const D: usize>(
     indexer: &LatticeIndexer,
     v: &[f32],
     p: &[f32],
-    sums: &mut [f32],
-    weights: &mut [f32],
+    c: usize,
+    out: &mut [f32],
 ) {
     let offsets = corner_offsets::<D>(indexer);
-    let stencils: Vec<(usize, [f32; D])> = p
-        .chunks_exact(D)
-        .map(|point| lower_corner::<D>(indexer, point))
-        .collect();
-    for (corner, &offset) in offsets.iter().enumerate().take(1 << D) {
-        for ((flat, fraction), &x) in stencils.iter().zip(v) {
-            let w = corner_weight::<D>(corner, fraction);
-            sums[flat + offset] += x * w;
-            weights[flat + offset] += w;
+    for (point, row) in p.chunks_exact(D).zip(out.chunks_exact_mut(c)) {
+        let (flat, fraction) = lower_corner::<D>(indexer, point);
+        for (corner, &offset) in offsets.iter().enumerate().take(1 << D) {
+            let weight = corner_weight::<D>(corner, &fraction);
+            let at = (flat + offset) * c;
+            for (o, &x) in row.iter_mut().zip(&v[at..at + c]) {
+                *o += x * weight;
+            }
         }
     }
+}
+
+/// [`Backend::float_lattice_splat`] on a `D`-dimensional lattice into `(sums [samples, c],
+/// weights [samples])`. Tent weights are added corner-major, as the composite scatter adds, so
+/// that the sums round the same.
+fn splat_kernel<const D: usize>(
+    indexer: &LatticeIndexer,
+    v: &[f32],
+    p: &[f32],
+    c: usize,
+    transfer: Transfer,
+    (sums, weights): (&mut [f32], &mut [f32]),
+) {
+    let mut add = |at: usize, value: &[f32], weight: f32| {
+        for (s, &x) in sums[at * c..(at + 1) * c].iter_mut().zip(value) {
+            *s += x * weight;
+        }
+        weights[at] += weight;
+    };
+    match transfer {
+        Transfer::NearestFace => {
+            for (point, value) in p.chunks_exact(D).zip(v.chunks_exact(c)) {
+                add(nearest_sample::<D>(indexer, point), value, 1.0);
+            }
+        }
+        Transfer::Linear => {
+            let offsets = corner_offsets::<D>(indexer);
+            let stencils: Vec<(usize, [f32; D])> = p
+                .chunks_exact(D)
+                .map(|point| lower_corner::<D>(indexer, point))
+                .collect();
+            for (corner, &offset) in offsets.iter().enumerate().take(1 << D) {
+                for ((flat, fraction), value) in stencils.iter().zip(v.chunks_exact(c)) {
+                    add(flat + offset, value, corner_weight::<D>(corner, fraction));
+                }
+            }
+        }
+    }
+}
+
+/// The flat index of the sample nearest to `point`.
+#[inline(always)]
+fn nearest_sample<const D: usize>(indexer: &LatticeIndexer, point: &[f32]) -> usize {
+    (0..D)
+        .map(|axis| {
+            let t = indexer.continuous(point[axis], axis) + 0.5;
+            (t as u32 as f32).min(indexer.upper[axis]) as usize * indexer.strides[axis]
+        })
+        .sum()
 }
 
 // -------------------------------------------------------------------- strided loops
