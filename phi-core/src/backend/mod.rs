@@ -645,6 +645,29 @@ pub trait Backend: Copy + Clone + Debug + Default + Send + Sync + 'static {
         crate::fields::sample::composite_lattice_splat::<Self>(lattice, points, values, transfer)
     }
 
+    /// Grows the valid region of `values` by `cells` layers, as
+    /// [`extrapolate_valid_tensor`](crate::fields::extrapolate_valid_tensor) documents: returns
+    /// `(values, valid)`. `valid` is a `0/1` mask matching `values` on the first `spatial_dims`
+    /// axes and broadcasting over the rest (the callers check the shapes). The default is built
+    /// from the primitive operations (differentiable in `values`); a backend may override it with
+    /// a fused kernel giving the same values.
+    ///
+    /// # Errors
+    /// Only shape errors, which the callers in [`crate::fields`] rule out.
+    fn float_extrapolate_valid(
+        values: Self::Float,
+        valid: Self::Float,
+        spatial_dims: usize,
+        cells: usize,
+    ) -> Result<(Self::Float, Self::Float)> {
+        crate::fields::extrapolate::composite_extrapolate_valid::<Self>(
+            values,
+            valid,
+            spatial_dims,
+            cells,
+        )
+    }
+
     /// The solution `x` of `matrix · x = rhs` and what the solve did. `rhs` is `[n]` or `[n, k]`
     /// (`k` right-hand sides, one per column) with `n = matrix.nrows()` of a square matrix; `x`
     /// has the shape and device of `rhs`. The matrix is a host-side constant (`f64`); the solve

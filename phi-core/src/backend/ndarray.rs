@@ -468,6 +468,99 @@ impl Backend for NdArray {
             from_vec(weights, &[samples, 1]),
         ))
     }
+
+    fn float_extrapolate_valid(
+        values: Self::Float,
+        valid: Self::Float,
+        spatial_dims: usize,
+        cells: usize,
+    ) -> Result<(Self::Float, Self::Float)> {
+        let (shape, mask_shape) = (values.shape().to_vec(), valid.shape().to_vec());
+        let sites: usize = shape[..spatial_dims].iter().product();
+        let channels: usize = shape[spatial_dims..].iter().product();
+        // One mask per site, or one per value: the fused kernel's layouts. Other broadcasts take
+        // the composite path.
+        let mask_channels = if mask_shape == shape {
+            channels
+        } else if mask_shape[spatial_dims..].iter().all(|&m| m == 1) {
+            1
+        } else {
+            return crate::fields::extrapolate::composite_extrapolate_valid::<Self>(
+                values,
+                valid,
+                spatial_dims,
+                cells,
+            );
+        };
+        let mut v = standard(&values).into_owned();
+        let mut mask: Vec<f32> = standard(&valid)
+            .iter()
+            .map(|&m| if m != 0.0 { 1.0 } else { 0.0 })
+            .collect();
+        let grid = &shape[..spatial_dims];
+        let mut sum = vec![0.0f32; sites * channels];
+        let mut count = vec![0.0f32; sites * mask_channels];
+        let mut scratch = Vec::new();
+        for _ in 0..cells {
+            for (site, (value, m)) in v
+                .chunks_exact(channels)
+                .zip(mask.chunks_exact(mask_channels))
+                .enumerate()
+            {
+                for (k, &x) in value.iter().enumerate() {
+                    sum[site * channels + k] = x * m[k % mask_channels];
+                }
+            }
+            count.copy_from_slice(&mask);
+            box_sum_in_place(&mut sum, grid, channels, &mut scratch);
+            box_sum_in_place(&mut count, grid, mask_channels, &mut scratch);
+            for site in 0..sites {
+                for k in 0..channels {
+                    let mk = site * mask_channels + k % mask_channels;
+                    let (n, was_valid) = (count[mk], mask[mk]);
+                    let reached = if n > 0.0 { 1.0 } else { 0.0 };
+                    let empty = if n <= 0.0 { 1.0 } else { 0.0 };
+                    if reached - reached * was_valid != 0.0 {
+                        v[site * channels + k] = sum[site * channels + k] / (n + empty);
+                    }
+                }
+            }
+            for (m, &n) in mask.iter_mut().zip(&count) {
+                *m = if n > 0.0 { 1.0 } else { 0.0 };
+            }
+        }
+        Ok((from_vec(v, &shape), from_vec(mask, &mask_shape)))
+    }
+}
+
+// -------------------------------------------------------------------- extrapolation kernel
+
+/// Replaces `data` (`[grid..., channels]`, row-major) by its sum over the `3^d` box around each
+/// site (zero beyond the edges), one axis after the other, each as `(x[i−1] + x[i]) + x[i+1]`:
+/// the order of the composite `box_sum`, so the results agree bit for bit.
+fn box_sum_in_place(data: &mut [f32], grid: &[usize], channels: usize, scratch: &mut Vec<f32>) {
+    for (axis, &n) in grid.iter().enumerate() {
+        let inner = grid[axis + 1..].iter().product::<usize>() * channels;
+        let outer: usize = grid[..axis].iter().product();
+        scratch.clear();
+        scratch.extend_from_slice(data);
+        for o in 0..outer {
+            let base = o * n * inner;
+            for i in 0..n {
+                let row = base + i * inner;
+                for k in 0..inner {
+                    let centre = scratch[row + k];
+                    let below = if i > 0 { scratch[row - inner + k] } else { 0.0 };
+                    let above = if i + 1 < n {
+                        scratch[row + inner + k]
+                    } else {
+                        0.0
+                    };
+                    data[row + k] = (below + centre) + above;
+                }
+            }
+        }
+    }
 }
 
 // -------------------------------------------------------------------- layout and shape helpers
@@ -811,18 +904,45 @@ fn corner_offsets<const D: usize>(indexer: &LatticeIndexer) -> [usize; 8] {
     offsets
 }
 
-/// The flat lower corner and the fractions of `point`, for a `D`-dimensional lattice.
-#[inline(always)]
-fn lower_corner<const D: usize>(indexer: &LatticeIndexer, point: &[f32]) -> (usize, [f32; D]) {
-    let mut flat = 0;
-    let mut fraction = [0.0f32; D];
-    for axis in 0..D {
-        let t = indexer.continuous(point[axis], axis);
-        let b = (t as u32 as f32).min(indexer.highest_base[axis]);
-        flat += b as usize * indexer.strides[axis];
-        fraction[axis] = t - b;
+/// [`LatticeIndexer`] in fixed-size arrays for a `D`-dimensional lattice, so the per-point loops
+/// keep everything in registers (no bounds checks, unrolled axes).
+struct FixedIndexer<const D: usize> {
+    origin: [f32; D],
+    inverse_spacing: [f32; D],
+    upper: [f32; D],
+    highest_base: [f32; D],
+    strides: [usize; D],
+}
+
+impl<const D: usize> FixedIndexer<D> {
+    fn new(indexer: &LatticeIndexer) -> Self {
+        let pick = |v: &[f32]| std::array::from_fn(|axis| v[axis]);
+        Self {
+            origin: pick(&indexer.origin),
+            inverse_spacing: pick(&indexer.inverse_spacing),
+            upper: pick(&indexer.upper),
+            highest_base: pick(&indexer.highest_base),
+            strides: std::array::from_fn(|axis| indexer.strides[axis]),
+        }
     }
-    (flat, fraction)
+
+    /// The flat lower corner and the fractions of `point`: the continuous index
+    /// `(x − origin) / spacing` clamped to `[0, shape − 1]`, its integer part capped at
+    /// `shape − 2`, as [`LatticeIndexer::continuous`] and the composite compute it.
+    #[inline(always)]
+    fn lower_corner(&self, point: &[f32]) -> (usize, [f32; D]) {
+        let mut flat = 0;
+        let mut fraction = [0.0f32; D];
+        for axis in 0..D {
+            let t = ((point[axis] - self.origin[axis]) * self.inverse_spacing[axis])
+                .max(0.0)
+                .min(self.upper[axis]);
+            let b = (t as u32 as f32).min(self.highest_base[axis]);
+            flat += b as usize * self.strides[axis];
+            fraction[axis] = t - b;
+        }
+        (flat, fraction)
+    }
 }
 
 /// The tent weight of `corner`, multiplied in axis order as the composite does.
@@ -850,8 +970,21 @@ fn sample_kernel<const D: usize>(
     out: &mut [f32],
 ) {
     let offsets = corner_offsets::<D>(indexer);
+    let fixed = FixedIndexer::<D>::new(indexer);
+    if c == 1 {
+        // One channel (a staggered component): a scalar accumulator, corners in the same order.
+        for (point, o) in p.chunks_exact(D).zip(out.iter_mut()) {
+            let (flat, fraction) = fixed.lower_corner(point);
+            let mut sum = 0.0f32;
+            for (corner, &offset) in offsets.iter().enumerate().take(1 << D) {
+                sum += v[flat + offset] * corner_weight::<D>(corner, &fraction);
+            }
+            *o = sum;
+        }
+        return;
+    }
     for (point, row) in p.chunks_exact(D).zip(out.chunks_exact_mut(c)) {
-        let (flat, fraction) = lower_corner::<D>(indexer, point);
+        let (flat, fraction) = fixed.lower_corner(point);
         for (corner, &offset) in offsets.iter().enumerate().take(1 << D) {
             let weight = corner_weight::<D>(corner, &fraction);
             let at = (flat + offset) * c;
@@ -887,9 +1020,10 @@ fn splat_kernel<const D: usize>(
         }
         Transfer::Linear => {
             let offsets = corner_offsets::<D>(indexer);
+            let fixed = FixedIndexer::<D>::new(indexer);
             let stencils: Vec<(usize, [f32; D])> = p
                 .chunks_exact(D)
-                .map(|point| lower_corner::<D>(indexer, point))
+                .map(|point| fixed.lower_corner(point))
                 .collect();
             for (corner, &offset) in offsets.iter().enumerate().take(1 << D) {
                 for ((flat, fraction), value) in stencils.iter().zip(v.chunks_exact(c)) {

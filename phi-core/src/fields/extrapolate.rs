@@ -60,8 +60,28 @@ pub fn extrapolate_valid_tensor<B: Backend>(
             ),
         });
     }
-    let mut values = values.clone();
-    let mut valid = valid.compare_scalar(CompareOp::NotEqual, 0.0);
+    let (values, valid) = B::float_extrapolate_valid(
+        values.primitive().clone(),
+        valid.primitive().clone(),
+        spatial_dims,
+        cells,
+    )?;
+    Ok((
+        Tensor::from_primitive(values),
+        Tensor::from_primitive(valid),
+    ))
+}
+
+/// [`Backend::float_extrapolate_valid`] from tensor operations (the default of every backend;
+/// differentiable in `values`).
+pub(crate) fn composite_extrapolate_valid<B: Backend>(
+    values: B::Float,
+    valid: B::Float,
+    spatial_dims: usize,
+    cells: usize,
+) -> Result<(B::Float, B::Float)> {
+    let mut values = Tensor::<B>::from_primitive(values);
+    let mut valid = Tensor::<B>::from_primitive(valid).compare_scalar(CompareOp::NotEqual, 0.0);
     for _ in 0..cells {
         let neighbour_sum = box_sum(&(&values * &valid), spatial_dims)?;
         let neighbour_count = box_sum(&valid, spatial_dims)?;
@@ -72,7 +92,7 @@ pub fn extrapolate_valid_tensor<B: Backend>(
         values = Tensor::select(&newly, &mean, &values)?;
         valid = reached;
     }
-    Ok((values, valid))
+    Ok((values.into_primitive(), valid.into_primitive()))
 }
 
 /// A grid whose valid region can be grown ([`extrapolate_valid`]) and that can be advected

@@ -15,7 +15,7 @@
 
 mod advect;
 mod domain;
-mod extrapolate;
+pub(crate) mod extrapolate;
 mod grid;
 pub mod ops;
 mod point_cloud;

@@ -144,3 +144,58 @@ fn grids_on_different_domains_do_not_mix() {
     let u = StaggeredGrid::<NdArray>::zeros(&unit(&[4, 8]), &device());
     assert!(advect_semi_lagrangian(&a, &u, 0.1).is_err());
 }
+
+#[test]
+fn fused_extrapolation_matches_the_composite_bit_for_bit() {
+    use crate::Backend;
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+    // (values shape, mask shape, spatial axes): one mask per site, per value, a broadcast the
+    // fused kernel leaves to the composite, 1D to 3D.
+    let cases: [(&[usize], &[usize], usize); 5] = [
+        (&[17], &[17], 1),
+        (&[9, 12, 2], &[9, 12, 1], 2),
+        (&[9, 12, 2], &[9, 12, 2], 2),
+        (&[5, 6, 7], &[5, 6, 7], 3),
+        (&[4, 5, 2, 3], &[4, 5, 1, 3], 2),
+    ];
+    for (shape, mask_shape, spatial) in cases {
+        let n: usize = shape.iter().product();
+        let m: usize = mask_shape.iter().product();
+        let values: Vec<f32> = (0..n).map(|_| rng.random_range(-2.0..2.0)).collect();
+        // A sparse valid set, so that several layers are needed and some samples stay invalid.
+        let mask: Vec<f32> = (0..m)
+            .map(|_| if rng.random_bool(0.08) { 1.0 } else { 0.0 })
+            .collect();
+        for cells in [0, 1, 3] {
+            let v = T::from_vec(values.clone(), shape, &device()).unwrap();
+            let k = T::from_vec(mask.clone(), mask_shape, &device()).unwrap();
+            let (fused_v, fused_k) = NdArray::float_extrapolate_valid(
+                v.primitive().clone(),
+                k.primitive().clone(),
+                spatial,
+                cells,
+            )
+            .unwrap();
+            let (plain_v, plain_k) = extrapolate::composite_extrapolate_valid::<NdArray>(
+                v.into_primitive(),
+                k.into_primitive(),
+                spatial,
+                cells,
+            )
+            .unwrap();
+            let as_bits = |t: &ndarray::ArcArray<f32, ndarray::IxDyn>| {
+                t.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+            };
+            assert_eq!(fused_v.shape(), plain_v.shape(), "{shape:?}");
+            assert_eq!(fused_k.shape(), plain_k.shape(), "{shape:?}");
+            assert_eq!(as_bits(&fused_v), as_bits(&plain_v), "{shape:?}, {cells} cells");
+            assert_eq!(as_bits(&fused_k), as_bits(&plain_k), "{shape:?}, {cells} cells");
+            if cells == 3 {
+                let grown = fused_k.iter().filter(|&&x| x == 1.0).count();
+                let before = mask.iter().filter(|&&x| x == 1.0).count();
+                assert!(grown > before, "{shape:?}: the valid region did not grow");
+            }
+        }
+    }
+}

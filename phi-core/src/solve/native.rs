@@ -3,17 +3,33 @@
 
 use std::sync::Arc;
 
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::linalg::solvers::Solve;
+use faer::sparse::linalg::cholesky::{
+    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
+    factorize_symbolic_cholesky,
+};
 use faer::sparse::linalg::solvers::{Llt, Lu};
-use faer::sparse::{SparseColMat, Triplet};
-use faer::{Mat, Side};
+use faer::sparse::{SparseColMat, SparseColMatRef, SymbolicSparseColMatRef, Triplet};
+use faer::{Conj, Mat, Par, Side};
 
 use super::sparse::SparseMatrix;
 use super::{Preconditioner, SolveError, SolveMethod, SolveOptions, SolveStats};
 
 /// A cached sparse Cholesky factorization.
 #[derive(Debug)]
-pub(crate) struct CholeskyFactor(Llt<usize, f64>);
+pub(crate) enum CholeskyFactor {
+    /// faer's, with its AMD ordering.
+    Amd(Llt<usize, f64>),
+    /// `P A Pᵀ = L Lᵀ` in the matrix's own elimination order (`order[k]`: the row eliminated
+    /// `k`-th), through faer's symbolic and numeric factorizations with the identity ordering.
+    Ordered {
+        symbolic: SymbolicCholesky<usize>,
+        values: Vec<f64>,
+        order: Arc<[usize]>,
+    },
+}
 
 /// A cached sparse LU factorization.
 #[derive(Debug)]
@@ -248,7 +264,7 @@ fn lower_triplets(matrix: &SparseMatrix, lower_only: bool) -> Vec<Triplet<usize,
         .collect()
 }
 
-fn cholesky(matrix: &SparseMatrix) -> Result<Arc<CholeskyFactor>, SolveError> {
+pub(super) fn cholesky(matrix: &SparseMatrix) -> Result<Arc<CholeskyFactor>, SolveError> {
     matrix
         .cholesky
         .get_or_init(|| {
@@ -257,6 +273,9 @@ fn cholesky(matrix: &SparseMatrix) -> Result<Arc<CholeskyFactor>, SolveError> {
                 method: "Cholesky",
                 reason,
             };
+            if let Some(order) = &matrix.ordering_arc() {
+                return ordered_cholesky(matrix, order.clone()).map(Arc::new);
+            }
             let entries = lower_triplets(matrix, true);
             let a = SparseColMat::<usize, f64>::try_new_from_triplets(
                 matrix.nrows(),
@@ -267,7 +286,7 @@ fn cholesky(matrix: &SparseMatrix) -> Result<Arc<CholeskyFactor>, SolveError> {
             let llt = a
                 .sp_cholesky(Side::Lower)
                 .map_err(|e| failed(format!("{e} (is the matrix positive definite?)")))?;
-            Ok(Arc::new(CholeskyFactor(llt)))
+            Ok(Arc::new(CholeskyFactor::Amd(llt)))
         })
         .clone()
 }
@@ -294,11 +313,153 @@ fn lu(matrix: &SparseMatrix) -> Result<Arc<LuFactor>, SolveError> {
         .clone()
 }
 
+/// Below this many unknowns the factorization and solves run sequentially: spawning parallel
+/// work costs more than it saves.
+const PARALLEL_CHOLESKY_UNKNOWNS: usize = 20_000;
+
+fn cholesky_parallelism(n: usize) -> Par {
+    if n < PARALLEL_CHOLESKY_UNKNOWNS {
+        Par::Seq
+    } else {
+        faer::get_global_parallelism()
+    }
+}
+
+/// The Cholesky factorization of `P A Pᵀ` for the elimination order `order` (see
+/// [`SparseMatrix::with_ordering`]): the upper triangle of the permuted matrix is assembled
+/// column by column (each column's rows sorted), then factorised by faer without a further
+/// ordering.
+fn ordered_cholesky(
+    matrix: &SparseMatrix,
+    order: Arc<[usize]>,
+) -> Result<CholeskyFactor, SolveError> {
+    let failed = |reason: String| SolveError::Factorization {
+        method: "Cholesky",
+        reason,
+    };
+    let n = matrix.nrows();
+    let (col_ptr, row_idx, values) = permuted_upper(matrix, &order);
+    let pattern = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
+    let upper = SparseColMatRef::new(pattern, &values);
+    let symbolic = factorize_symbolic_cholesky(
+        pattern,
+        Side::Upper,
+        SymmetricOrdering::Identity,
+        CholeskySymbolicParams::default(),
+    )
+    .map_err(|e| failed(format!("{e:?}")))?;
+    let par = cholesky_parallelism(n);
+    let mut factor = vec![0.0; symbolic.len_val()];
+    let mut scratch =
+        MemBuffer::try_new(symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()))
+            .map_err(|e| failed(format!("{e:?}")))?;
+    symbolic
+        .factorize_numeric_llt(
+            &mut factor,
+            upper,
+            Side::Upper,
+            LltRegularization::default(),
+            par,
+            MemStack::new(&mut scratch),
+            Default::default(),
+        )
+        .map_err(|e| failed(format!("{e} (is the matrix positive definite?)")))?;
+    Ok(CholeskyFactor::Ordered {
+        symbolic,
+        values: factor,
+        order,
+    })
+}
+
+/// The upper triangle of `P A Pᵀ` for a symmetric `A` as CSC arrays (column pointers, row
+/// indices sorted within each column, values): column `k` holds the entries of row `order[k]`
+/// of `A` whose new index is at most `k`.
+fn permuted_upper(matrix: &SparseMatrix, order: &[usize]) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
+    let n = matrix.nrows();
+    let mut position = vec![0usize; n];
+    for (k, &row) in order.iter().enumerate() {
+        position[row] = k;
+    }
+    let mut col_ptr = Vec::with_capacity(n + 1);
+    let mut row_idx = Vec::with_capacity(matrix.nnz() / 2 + n);
+    let mut values = Vec::with_capacity(matrix.nnz() / 2 + n);
+    let mut column: Vec<(usize, f64)> = Vec::new();
+    col_ptr.push(0);
+    for (k, &row) in order.iter().enumerate() {
+        column.clear();
+        column.extend(
+            matrix
+                .row(row)
+                .map(|(j, v)| (position[j], v))
+                .filter(|&(i, _)| i <= k),
+        );
+        column.sort_unstable_by_key(|&(i, _)| i);
+        for &(i, v) in &column {
+            row_idx.push(i);
+            values.push(v);
+        }
+        col_ptr.push(row_idx.len());
+    }
+    (col_ptr, row_idx, values)
+}
+
+/// Entries of the Cholesky factor of a symmetric `matrix` under faer's AMD ordering.
+#[cfg(test)]
+pub(super) fn amd_factor_entries(matrix: &SparseMatrix) -> usize {
+    let n = matrix.nrows();
+    let identity: Vec<usize> = (0..n).collect();
+    let (col_ptr, row_idx, _) = permuted_upper(matrix, &identity);
+    let pattern = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
+    factorize_symbolic_cholesky(
+        pattern,
+        Side::Upper,
+        SymmetricOrdering::Amd,
+        CholeskySymbolicParams::default(),
+    )
+    .expect("a valid pattern")
+    .len_val()
+}
+
 impl CholeskyFactor {
+    /// Stored entries of the factor `L` (its fill), for a factor in the matrix's own order.
+    #[cfg(test)]
+    pub(super) fn factor_entries(&self) -> Option<usize> {
+        match self {
+            CholeskyFactor::Amd(_) => None,
+            CholeskyFactor::Ordered { symbolic, .. } => Some(symbolic.len_val()),
+        }
+    }
+
     fn solve(&self, b: &[f64]) -> Vec<f64> {
-        let mut x = Mat::<f64>::from_fn(b.len(), 1, |i, _| b[i]);
-        self.0.solve_in_place(&mut x);
-        (0..b.len()).map(|i| x[(i, 0)]).collect()
+        match self {
+            CholeskyFactor::Amd(llt) => {
+                let mut x = Mat::<f64>::from_fn(b.len(), 1, |i, _| b[i]);
+                llt.solve_in_place(&mut x);
+                (0..b.len()).map(|i| x[(i, 0)]).collect()
+            }
+            CholeskyFactor::Ordered {
+                symbolic,
+                values,
+                order,
+            } => {
+                // P A Pᵀ (P x) = P b.
+                let n = b.len();
+                let mut y = Mat::<f64>::from_fn(n, 1, |k, _| b[order[k]]);
+                let par = cholesky_parallelism(n);
+                let mut scratch = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, par));
+                LltRef::new(symbolic, values).solve_in_place_with_conj(
+                    Conj::No,
+                    y.as_mut(),
+                    par,
+                    MemStack::new(&mut scratch),
+                );
+                let mut x = vec![0.0; n];
+                for (k, &row) in order.iter().enumerate() {
+                    x[row] = y[(k, 0)];
+                }
+                x
+            }
+        }
     }
 }
 

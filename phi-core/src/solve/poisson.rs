@@ -1,6 +1,7 @@
 //! The masked Poisson matrix of FLIP's pressure projection (thesis eq. 2.9).
 
-use std::sync::Arc;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
 
 use super::SolveError;
 use super::sparse::SparseMatrix;
@@ -210,7 +211,14 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
     }
     let n = unknown_to_cell.len();
 
-    let mut triplets = Vec::with_capacity(n * (2 * d + 1));
+    // CSR rows, assembled in column order: unknowns are numbered in row-major cell order, so a
+    // row's columns increase as lower neighbours from axis 0 to d−1 (strides decreasing), the
+    // diagonal, then upper neighbours from axis d−1 to 0.
+    let mut row_ptr = Vec::with_capacity(n + 1);
+    let mut col_indices = Vec::with_capacity(n * (2 * d + 1));
+    let mut values = Vec::with_capacity(n * (2 * d + 1));
+    let mut diagonal_at = Vec::with_capacity(n);
+    row_ptr.push(0);
     let mut anchored = vec![false; n];
     // Union-find over unknowns joined by open faces.
     let mut parent: Vec<usize> = (0..n).collect();
@@ -223,6 +231,9 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
     }
 
     let mut index = vec![0usize; d];
+    // Per axis, the off-diagonal entries towards the lower and the upper neighbour.
+    let mut lower: Vec<Option<(usize, f64)>> = vec![None; d];
+    let mut upper: Vec<Option<(usize, f64)>> = vec![None; d];
     for (u, &cell) in unknown_to_cell.iter().enumerate() {
         let mut rest = cell;
         for axis in 0..d {
@@ -234,8 +245,14 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
             let faces = face_open[axis].as_ref();
             // The lower face of the cell along `axis` has the cell's own multi-index.
             let lower_face: usize = (0..d).map(|a| index[a] * face_strides[axis][a]).sum();
-            for upper in [false, true] {
-                let face = if upper {
+            for is_upper in [false, true] {
+                let slot = if is_upper {
+                    &mut upper[axis]
+                } else {
+                    &mut lower[axis]
+                };
+                *slot = None;
+                let face = if is_upper {
                     lower_face + face_strides[axis][axis]
                 } else {
                     lower_face
@@ -245,20 +262,20 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
                     continue;
                 }
                 let coefficient = w * coefficients[axis];
-                let at_side = if upper {
+                let at_side = if is_upper {
                     index[axis] + 1 == resolution[axis]
                 } else {
                     index[axis] == 0
                 };
                 if at_side {
-                    let side = domain.boundaries()[axis][usize::from(upper)];
+                    let side = domain.boundaries()[axis][usize::from(is_upper)];
                     if side == Boundary::Open {
                         diagonal += coefficient;
                         anchored[u] = true;
                     }
                     continue;
                 }
-                let neighbour = if upper {
+                let neighbour = if is_upper {
                     cell + cell_strides[axis]
                 } else {
                     cell - cell_strides[axis]
@@ -266,7 +283,7 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
                 diagonal += coefficient;
                 match cell_to_unknown[neighbour] {
                     Some(v) => {
-                        triplets.push((u, v, -coefficient));
+                        *slot = Some((v, -coefficient));
                         let (a, b) = (find(&mut parent, u), find(&mut parent, v));
                         parent[a] = b;
                     }
@@ -274,7 +291,18 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
                 }
             }
         }
-        triplets.push((u, u, diagonal));
+        for &(v, value) in lower.iter().flatten() {
+            col_indices.push(v);
+            values.push(value);
+        }
+        diagonal_at.push(values.len());
+        col_indices.push(u);
+        values.push(diagonal);
+        for &(v, value) in upper.iter().rev().flatten() {
+            col_indices.push(v);
+            values.push(value);
+        }
+        row_ptr.push(col_indices.len());
     }
 
     // Regions, numbered in order of their first unknown.
@@ -298,10 +326,21 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
         if !is_anchored {
             let u = region_first[region];
             pinned.push(u);
-            triplets.push((u, u, pin));
+            values[diagonal_at[u]] += pin;
         }
     }
-    let matrix = SparseMatrix::from_triplets(n, n, &triplets)?;
+    let mut matrix = SparseMatrix::from_csr(n, n, row_ptr, col_indices, values)?.assume_symmetric();
+    if d <= 2 {
+        // Eliminate in the grid's nested-dissection order restricted to the liquid cells: in 2D
+        // a fill-reducing order within 1.5× of AMD's fill, known before the matrix is, which
+        // saves the AMD analysis (as costly as the factorization of a matrix used once). 3D
+        // keeps AMD: a box's nested dissection fills 1.5× more there.
+        let order: Vec<usize> = nested_dissection(resolution)
+            .iter()
+            .filter_map(|&cell| cell_to_unknown[cell as usize])
+            .collect();
+        matrix = matrix.with_ordering(order)?;
+    }
     Ok(PoissonSystem {
         matrix: Arc::new(matrix),
         cell_to_unknown,
@@ -310,4 +349,82 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
         region_of,
         region_is_singular: region_anchored.iter().map(|&a| !a).collect(),
     })
+}
+
+/// The cells of a grid of `resolution` (row-major indices) in nested-dissection order: split the
+/// box across its longest axis, order the two halves recursively, then the separating layer.
+/// Eliminating cells in this order keeps the Cholesky factor of a grid Laplacian small
+/// (`O(n log n)` entries in 2D), like AMD, but needs no look at the matrix, so it is computed once
+/// per resolution and cached.
+pub fn nested_dissection(resolution: &[usize]) -> Arc<[u32]> {
+    static CACHE: OnceLock<Mutex<HashMap<Vec<usize>, Arc<[u32]>>>> = OnceLock::new();
+    let cache = CACHE.get_or_init(Default::default);
+    if let Some(order) = cache.lock().ok().and_then(|c| c.get(resolution).cloned()) {
+        return order;
+    }
+    let strides = strides(resolution);
+    let mut order = Vec::with_capacity(resolution.iter().product());
+    let lo = vec![0; resolution.len()];
+    dissect(&lo, resolution, &strides, &mut order);
+    let order: Arc<[u32]> = order.into();
+    if let Ok(mut c) = cache.lock() {
+        c.insert(resolution.to_vec(), order.clone());
+    }
+    order
+}
+
+/// Appends the cells of the box `[lo, hi)` in nested-dissection order.
+fn dissect(lo: &[usize], hi: &[usize], strides: &[usize], order: &mut Vec<u32>) {
+    let extent: Vec<usize> = lo
+        .iter()
+        .zip(hi)
+        .map(|(l, h)| h.saturating_sub(*l))
+        .collect();
+    let cells: usize = extent.iter().product();
+    if cells == 0 {
+        return;
+    }
+    let (axis, &longest) = extent
+        .iter()
+        .enumerate()
+        .max_by_key(|&(a, &e)| (e, std::cmp::Reverse(a)))
+        .expect("a grid has at least one axis");
+    if cells <= 8 || longest < 3 {
+        append_box(lo, hi, strides, order);
+        return;
+    }
+    let middle = lo[axis] + longest / 2;
+    let mut left_hi = hi.to_vec();
+    left_hi[axis] = middle;
+    let mut right_lo = lo.to_vec();
+    right_lo[axis] = middle + 1;
+    dissect(lo, &left_hi, strides, order);
+    dissect(&right_lo, hi, strides, order);
+    let mut separator_lo = lo.to_vec();
+    separator_lo[axis] = middle;
+    let mut separator_hi = hi.to_vec();
+    separator_hi[axis] = middle + 1;
+    dissect(&separator_lo, &separator_hi, strides, order);
+}
+
+/// Appends the cells of the box `[lo, hi)` in row-major order.
+fn append_box(lo: &[usize], hi: &[usize], strides: &[usize], order: &mut Vec<u32>) {
+    let d = lo.len();
+    let mut index = lo.to_vec();
+    loop {
+        let cell: usize = index.iter().zip(strides).map(|(i, s)| i * s).sum();
+        order.push(cell as u32);
+        let mut axis = d;
+        loop {
+            if axis == 0 {
+                return;
+            }
+            axis -= 1;
+            index[axis] += 1;
+            if index[axis] < hi[axis] {
+                break;
+            }
+            index[axis] = lo[axis];
+        }
+    }
 }

@@ -439,3 +439,105 @@ fn max_error(
         .map(|(a, b)| (a - b).abs())
         .fold(0.0, f64::max)
 }
+
+#[test]
+fn nested_dissection_orders_every_cell_once() {
+    for resolution in [
+        vec![1, 7],
+        vec![33, 17],
+        vec![64, 64],
+        vec![5, 3, 2],
+        vec![9, 16, 11],
+    ] {
+        let order = nested_dissection(&resolution);
+        let cells: usize = resolution.iter().product();
+        let mut seen = vec![false; cells];
+        for &cell in order.iter() {
+            assert!(!seen[cell as usize], "{resolution:?}: cell {cell} twice");
+            seen[cell as usize] = true;
+        }
+        assert!(seen.iter().all(|&s| s), "{resolution:?}: a cell is missing");
+    }
+}
+
+/// The same matrix without an elimination order (faer's AMD then orders it).
+fn without_ordering(a: &SparseMatrix) -> SparseMatrix {
+    SparseMatrix::from_csr(
+        a.nrows(),
+        a.ncols(),
+        a.row_ptr().to_vec(),
+        a.col_indices().to_vec(),
+        a.values().to_vec(),
+    )
+    .unwrap()
+}
+
+#[test]
+fn grid_ordered_cholesky_matches_amd_and_keeps_the_fill_small() {
+    for resolution in [vec![64, 64], vec![33, 20]] {
+        let system = box_poisson(&resolution);
+        let ordered = &system.matrix;
+        assert!(ordered.ordering().is_some());
+        let amd = without_ordering(ordered);
+        let b = random_vec(ordered.nrows(), 5);
+        let options = SolveOptions::with_method(SolveMethod::Cholesky);
+        let (x_ordered, _) = solve(ordered, &b, 1, &options).unwrap();
+        let (x_amd, _) = solve(&amd, &b, 1, &options).unwrap();
+        let scale = norm(&x_amd);
+        let difference = norm(
+            &x_ordered
+                .iter()
+                .zip(&x_amd)
+                .map(|(p, q)| p - q)
+                .collect::<Vec<_>>(),
+        );
+        assert!(
+            difference <= 1e-10 * scale,
+            "{resolution:?}: {difference} vs {scale}"
+        );
+        assert!(residual(ordered, &x_ordered, &b) <= 1e-9 * norm(&b));
+
+        // Fill: nested dissection stays within 1.5× of AMD (measured 1.33× at 64²) and far
+        // below the natural (banded) order.
+        let natural = without_ordering(ordered)
+            .with_ordering((0..ordered.nrows()).collect())
+            .unwrap();
+        let fill = |m: &SparseMatrix| native::cholesky(m).unwrap().factor_entries().unwrap();
+        let (nd, amd, banded) = (
+            fill(ordered),
+            native::amd_factor_entries(ordered),
+            fill(&natural),
+        );
+        println!(
+            "{resolution:?}: factor entries nested dissection {nd}, AMD {amd}, natural {banded}"
+        );
+        assert!(
+            nd as f64 <= 1.5 * amd as f64 && (resolution[0] < 64 || 2 * nd < banded),
+            "{resolution:?}: {nd} vs AMD {amd}"
+        );
+    }
+    // 3D systems keep faer's AMD ordering (nested dissection of a box measured 1.5× AMD's fill
+    // at 12³; the default 3D method is CG anyway).
+    assert!(box_poisson(&[6, 6, 6]).matrix.ordering().is_none());
+}
+
+#[test]
+fn elimination_orders_must_be_permutations() {
+    let a = random_spd(5, 2, 1);
+    for order in [vec![0, 1, 2, 3], vec![0, 1, 2, 3, 3], vec![0, 1, 2, 3, 5]] {
+        assert!(matches!(
+            a.clone().with_ordering(order),
+            Err(SolveError::Invalid { .. })
+        ));
+    }
+    let reversed = a.clone().with_ordering(vec![4, 3, 2, 1, 0]).unwrap();
+    let b = random_vec(5, 2);
+    let (x, _) = solve(
+        &reversed,
+        &b,
+        1,
+        &SolveOptions::with_method(SolveMethod::Cholesky),
+    )
+    .unwrap();
+    assert!(residual(&a, &x, &b) <= 1e-12 * norm(&b));
+}
