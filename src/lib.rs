@@ -7,7 +7,9 @@
 //! - [`phi_gns`]: Graph Network-based Simulators.
 
 pub mod backends;
+pub mod dataset;
 pub mod demo;
+pub mod optimize;
 pub mod output;
 pub mod simulate;
 

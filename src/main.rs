@@ -57,6 +57,15 @@ enum Command {
         #[arg(long, default_value_t = 25)]
         checkpoint_every: usize,
     },
+    /// Generate, merge and inspect FLIP datasets (thesis section 5.2).
+    Dataset {
+        #[command(subcommand)]
+        command: phi::dataset::cli::DatasetCommand,
+    },
+    /// Render one trajectory of a dataset as an animated GIF.
+    Render(phi::dataset::cli::RenderArgs),
+    /// Optimise initial particle positions through the simulation to match a target (thesis 4.3).
+    Optimize(phi::optimize::OptimizeArgs),
 }
 
 fn main() -> Result<()> {
@@ -105,6 +114,9 @@ fn main() -> Result<()> {
             backend,
             device,
         ),
+        Command::Dataset { command } => phi::dataset::cli::run(command),
+        Command::Render(args) => phi::dataset::cli::render(args),
+        Command::Optimize(args) => phi::optimize::run(args),
     }
 }
 

@@ -3,14 +3,23 @@
 //! FLIP, PIC or a blend, and scenes read from TOML files.
 
 mod error;
+pub mod loss;
+pub mod optimize;
+mod random;
 mod scene;
 mod seed;
 mod sim;
 
 pub use error::{FlipError, Result};
+pub use loss::Loss;
+pub use optimize::{OptimizeConfig, OptimizeError, OptimizeOutcome, OptimizeProblem};
+pub use random::{
+    BlockDraw, OBSTACLE_ATTEMPTS, ObstacleDraw, ParticleTrajectory, RandomScene, RandomSceneParams,
+    SceneVariant, cell_centres, generate_random_scene, record_trajectory,
+};
 pub use scene::{
     DomainSpec, InflowSpec, LiquidSpec, PlacementSpec, RunSpec, Scene, SceneSetup, Scheme,
     SimulationSpec, SolverSpec, TransferSpec,
 };
 pub use seed::{Placement, seed_particles};
-pub use sim::{FlipParams, FlipSimulation, Inflow, Particles, StepStats};
+pub use sim::{FlipParams, FlipSimulation, Inflow, Particles, SceneParameters, StepStats};

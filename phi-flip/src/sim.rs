@@ -139,6 +139,50 @@ impl<B: Backend> Particles<B> {
     }
 }
 
+/// The scene parameters a step reads, as tensors, so that gradients reach them on an autodiff
+/// backend: make a copy with [`Tensor::require_grad`] leaves and pass it to
+/// [`FlipSimulation::step_with`].
+///
+/// [`FlipSimulation::scene_parameters`] gives the values the simulation was built with.
+#[derive(Debug, Clone)]
+pub struct SceneParameters<B: Backend> {
+    /// Gravity `[d]`, domain units per s².
+    pub gravity: Tensor<B>,
+    /// Per obstacle, a translation `[1, d]` of its geometry (zero: where the scene puts it). The
+    /// gradient reaches it through the push out of the obstacle, `push(x − c) + c`; the obstacle's
+    /// cells and blocked faces are rasterised at its value and held constant.
+    pub obstacle_offsets: Vec<Tensor<B>>,
+    /// Per inflow, the velocity `[1, d]` of the particles it emits.
+    pub inflow_velocities: Vec<Tensor<B>>,
+}
+
+impl<B: Backend> SceneParameters<B> {
+    /// Every parameter as a tracked leaf (same values), for taking gradients.
+    pub fn require_grad(&self) -> Self
+    where
+        B: phi_core::AutodiffBackend,
+    {
+        Self {
+            gravity: self.gravity.require_grad(),
+            obstacle_offsets: self
+                .obstacle_offsets
+                .iter()
+                .map(Tensor::require_grad)
+                .collect(),
+            inflow_velocities: self
+                .inflow_velocities
+                .iter()
+                .map(Tensor::require_grad)
+                .collect(),
+        }
+    }
+
+    /// The obstacle offsets on the host, one `Vec` of `d` values per obstacle.
+    fn offsets_on_host(&self) -> Vec<Vec<f32>> {
+        self.obstacle_offsets.iter().map(Tensor::to_vec).collect()
+    }
+}
+
 /// What one step did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct StepStats {
@@ -182,10 +226,24 @@ struct ObstacleMasks<B: Backend> {
 ///
 /// # What is differentiable
 /// The step is built from tensor operations: on an autodiff backend, gradients flow from any
-/// later particle state to earlier positions and velocities and to the gravity. Held constant, as
-/// in Φ_Flow: which cells are liquid, which faces are valid or blocked, which cell and which
-/// grid samples a particle falls between (the transfer weights are differentiated, their
-/// indices are not); the pressure solve is differentiated implicitly (one adjoint solve).
+/// later particle state to earlier positions and velocities and, through
+/// [`step_with`](Self::step_with) and [`SceneParameters`], to the gravity, each obstacle's offset
+/// (through the push `push(x − c) + c`: particles pushed onto an obstacle's surface move with it)
+/// and each inflow's velocity. The pressure solve is differentiated implicitly (one adjoint solve
+/// with the same matrix). Held constant, as in Φ_Flow — the gradient is that of the smooth piece
+/// the state lies on:
+/// - which cells are liquid (occupancy is computed from detached positions) and so the
+///   pressure matrix;
+/// - which faces are valid (received particle weight) or blocked by an obstacle, and the
+///   obstacles' rasterisation (computed on the host at the offsets' values);
+/// - which cell and which grid samples a particle falls between (the transfer weights are
+///   differentiated, their indices are not), and which obstacle side a particle is pushed to;
+/// - the number of extrapolation layers (from the step's largest grid speed, read on the host);
+/// - where inflows seed their particles (only their velocity is a parameter);
+/// - the clamp into the domain (zero gradient across a wall for a clamped coordinate).
+///
+/// Finite differences agree with these gradients wherever a perturbation changes none of the
+/// above (`phi-flip/tests/flip/gradients.rs`).
 #[derive(Debug, Clone)]
 pub struct FlipSimulation<B: Backend> {
     domain: Domain,
@@ -260,7 +318,7 @@ impl<B: Backend> FlipSimulation<B> {
             cfl_warned: Default::default(),
         };
         if !simulation.obstacles.iter().any(Obstacle::is_moving) {
-            simulation.static_masks = Some(simulation.obstacle_masks(0.0)?);
+            simulation.static_masks = Some(simulation.obstacle_masks(0.0, &[])?);
         }
         Ok(simulation)
     }
@@ -285,11 +343,97 @@ impl<B: Backend> FlipSimulation<B> {
     /// # Errors
     /// Only geometry errors, which cannot happen for valid obstacles.
     pub fn obstacles_at(&self, time: f32) -> Result<Vec<Obstacle>> {
-        Ok(self
-            .obstacles
+        self.shifted_obstacles_at(time, &[])
+    }
+
+    /// The obstacles at `time`, obstacle `i` translated by `offsets[i]` (missing or all-zero
+    /// offsets: not translated).
+    fn shifted_obstacles_at(&self, time: f32, offsets: &[Vec<f32>]) -> Result<Vec<Obstacle>> {
+        self.obstacles
             .iter()
-            .map(|o| o.advanced(time))
-            .collect::<std::result::Result<_, _>>()?)
+            .enumerate()
+            .map(|(i, o)| {
+                let o = o.advanced(time)?;
+                match offsets.get(i) {
+                    Some(c) if c.iter().any(|&v| v != 0.0) => Ok(Obstacle::new(
+                        o.geometry().shifted(c)?,
+                        o.velocity().to_vec(),
+                    )?),
+                    _ => Ok(o),
+                }
+            })
+            .collect()
+    }
+
+    /// The scene parameters this simulation was built with, as tensors: the gravity of
+    /// [`FlipParams`], zero obstacle offsets and the inflows' velocities.
+    ///
+    /// # Errors
+    /// Only tensor errors.
+    pub fn scene_parameters(&self) -> Result<SceneParameters<B>> {
+        let d = self.domain.dim();
+        let device = &self.device;
+        Ok(SceneParameters {
+            gravity: Tensor::from_vec(self.params.gravity.clone(), &[d], device)?,
+            obstacle_offsets: self
+                .obstacles
+                .iter()
+                .map(|_| Tensor::zeros(&[1, d], device))
+                .collect(),
+            inflow_velocities: self
+                .inflows
+                .iter()
+                .map(|f| Tensor::from_vec(f.velocity.clone(), &[1, d], device))
+                .collect::<std::result::Result<_, _>>()?,
+        })
+    }
+
+    /// Checks that `scene` fits this simulation (shapes and counts).
+    fn check_scene_parameters(&self, scene: &SceneParameters<B>) -> Result<()> {
+        let d = self.domain.dim();
+        let invalid = |reason: String| {
+            Err(FlipError::InvalidParameter {
+                name: "scene parameters",
+                reason,
+            })
+        };
+        if scene.gravity.shape() != [d] {
+            return invalid(format!(
+                "gravity must have shape [{d}], got {:?}",
+                scene.gravity.shape()
+            ));
+        }
+        for (what, tensors, count) in [
+            (
+                "obstacle_offsets",
+                &scene.obstacle_offsets,
+                self.obstacles.len(),
+            ),
+            (
+                "inflow_velocities",
+                &scene.inflow_velocities,
+                self.inflows.len(),
+            ),
+        ] {
+            if tensors.len() != count {
+                return invalid(format!(
+                    "{what}: one per {}, {count} expected, got {}",
+                    if what.starts_with("obstacle") {
+                        "obstacle"
+                    } else {
+                        "inflow"
+                    },
+                    tensors.len()
+                ));
+            }
+            if let Some(t) = tensors.iter().find(|t| t.shape() != [1, d]) {
+                return invalid(format!(
+                    "{what} must have shape [1, {d}], got {:?}",
+                    t.shape()
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Cells whose centre lies inside an obstacle at `time`, row-major over the resolution.
@@ -297,7 +441,7 @@ impl<B: Backend> FlipSimulation<B> {
     /// # Errors
     /// Only geometry errors.
     pub fn solid_cells(&self, time: f32) -> Result<Vec<bool>> {
-        let masks = self.masks_at(time)?;
+        let masks = self.masks_at(time, &[])?;
         Ok(masks
             .solid
             .values()
@@ -307,17 +451,18 @@ impl<B: Backend> FlipSimulation<B> {
             .collect())
     }
 
-    fn masks_at(&self, time: f32) -> Result<ObstacleMasks<B>> {
+    fn masks_at(&self, time: f32, offsets: &[Vec<f32>]) -> Result<ObstacleMasks<B>> {
+        let shifted = offsets.iter().flatten().any(|&v| v != 0.0);
         match &self.static_masks {
-            Some(m) => Ok(m.clone()),
-            None => self.obstacle_masks(time),
+            Some(m) if !shifted => Ok(m.clone()),
+            _ => self.obstacle_masks(time, offsets),
         }
     }
 
     /// Rasterises the obstacles at `time`: a face is blocked when a cell on either side is solid
     /// (Φ_Flow's staggered accessibility), so the pressure solve never couples liquid with the
     /// inside of an obstacle.
-    fn obstacle_masks(&self, time: f32) -> Result<ObstacleMasks<B>> {
+    fn obstacle_masks(&self, time: f32, offsets: &[Vec<f32>]) -> Result<ObstacleMasks<B>> {
         let domain = &self.domain;
         let d = domain.dim();
         let device = &self.device;
@@ -329,7 +474,7 @@ impl<B: Backend> FlipSimulation<B> {
         let mut blocked_total: Vec<Tensor<B>> = (0..d)
             .map(|a| Tensor::zeros(&domain.staggered_shape(a), device))
             .collect();
-        for obstacle in self.obstacles_at(time)? {
+        for obstacle in self.shifted_obstacles_at(time, offsets)? {
             let inside = obstacle.geometry().cell_inside_mask::<B>(domain, device)?;
             solid = solid.maximum(&inside)?;
             let blocked = blocked_faces(&inside)?;
@@ -397,6 +542,19 @@ impl<B: Backend> FlipSimulation<B> {
     /// # Errors
     /// Only tensor errors.
     pub fn emit(&self, particles: &Particles<B>, step: usize) -> Result<Particles<B>> {
+        self.emit_with(particles, step, &self.scene_parameters()?)
+    }
+
+    /// [`emit`](Self::emit) with the inflow velocities of `scene`.
+    ///
+    /// # Errors
+    /// Only tensor errors.
+    pub fn emit_with(
+        &self,
+        particles: &Particles<B>,
+        step: usize,
+        scene: &SceneParameters<B>,
+    ) -> Result<Particles<B>> {
         let mut out = particles.clone();
         for (i, inflow) in self.inflows.iter().enumerate() {
             let active =
@@ -418,6 +576,11 @@ impl<B: Backend> FlipSimulation<B> {
             if new.is_empty() {
                 continue;
             }
+            // The emitted velocity is the (possibly tracked) inflow parameter, broadcast.
+            let new = Particles {
+                velocities: new.velocities.zeros_like() + &scene.inflow_velocities[i],
+                positions: new.positions,
+            };
             out = if out.is_empty() {
                 new
             } else {
@@ -437,7 +600,24 @@ impl<B: Backend> FlipSimulation<B> {
     /// [`FlipError::Solve`] when the pressure solve fails, [`FlipError::NonFinite`] when the new
     /// state is not finite.
     pub fn step(&self, particles: &Particles<B>, step: usize) -> Result<(Particles<B>, StepStats)> {
-        let particles = self.emit(particles, step)?;
+        self.step_with(particles, step, &self.scene_parameters()?)
+    }
+
+    /// [`step`](Self::step) with the scene parameters `scene` (gravity, obstacle offsets, inflow
+    /// velocities) given as tensors, so that gradients reach them.
+    ///
+    /// # Errors
+    /// As [`step`](Self::step), and [`FlipError::InvalidParameter`] when `scene` does not fit the
+    /// simulation.
+    pub fn step_with(
+        &self,
+        particles: &Particles<B>,
+        step: usize,
+        scene: &SceneParameters<B>,
+    ) -> Result<(Particles<B>, StepStats)> {
+        self.check_scene_parameters(scene)?;
+        let offsets = scene.offsets_on_host();
+        let particles = self.emit_with(particles, step, scene)?;
         if particles.is_empty() {
             return Ok((particles, StepStats::default()));
         }
@@ -445,7 +625,7 @@ impl<B: Backend> FlipSimulation<B> {
         let params = &self.params;
         let dt = params.dt;
         let time = step as f32 * dt;
-        let masks = self.masks_at(time)?;
+        let masks = self.masks_at(time, &offsets)?;
         let positions = &particles.positions;
 
         // 1. Particles → grid.
@@ -454,7 +634,8 @@ impl<B: Backend> FlipSimulation<B> {
         let valid = valid_faces(&weights)?;
 
         // 2. Forces.
-        let forced = grid.map(|axis, c| Ok(c + params.gravity[axis] * dt))?;
+        let forced =
+            grid.map(|axis, c| Ok(c + &(scene.gravity.narrow(0, axis..axis + 1)? * dt)))?;
 
         // 3. Pressure projection on the cells holding particles, obstacles blocking their faces.
         let occupied = occupied_cells(&positions.detach(), domain)?;
@@ -529,11 +710,19 @@ impl<B: Backend> FlipSimulation<B> {
         let advected = rk4(positions, &advection_field, dt)?;
 
         // 6. Out of the obstacles, into the domain.
+        //    Each obstacle pushes in its own frame, `push(x − c) + c`, so that the gradient
+        //    reaches its offset `c`.
         let mut moved = advected;
-        for obstacle in self.obstacles_at(time + dt)? {
+        for (obstacle, offset) in self
+            .obstacles_at(time + dt)?
+            .iter()
+            .zip(&scene.obstacle_offsets)
+        {
+            let local = &moved - offset;
             moved = obstacle
                 .geometry()
-                .push(&moved, PushDirection::Outward, params.push_offset)?;
+                .push(&local, PushDirection::Outward, params.push_offset)?
+                + offset;
         }
         moved = clamp_into(&moved, domain)?;
 

@@ -8,6 +8,13 @@ use phi_core::fields::{Boundary, Domain};
 use phi_flip::{FlipParams, FlipSimulation, Particles, Placement, Scene};
 use phi_geom::{Geometry, Obstacle, Rotation};
 
+#[path = "flip/gradients.rs"]
+mod gradients;
+#[path = "flip/optimize.rs"]
+mod optimize;
+#[path = "flip/random.rs"]
+mod random;
+
 type Nd = NdArray;
 
 fn closed(res: &[usize]) -> Domain {

@@ -1,26 +1,32 @@
 //! Writing simulation output: NumPy arrays and pictures.
 //!
 //! - [`npz`]: reading and writing NumPy `.npy` arrays and `.npz` archives ([`write_npz`],
-//!   [`read_npz`]), so that trajectories can be exchanged with Python tooling;
+//!   [`read_npz`]), so that trajectories can be exchanged with Python tooling; it lives in
+//!   [`phi_core::io::npz`] (so that the library crates can use it) and is re-exported here;
 //! - [`render`]: drawing particle frames ([`render_frame`]) and saving them as PNG pictures
 //!   ([`write_png`]) or streamed animated GIFs ([`GifWriter`]).
 //!
 //! Every fallible function returns [`OutputError`]; errors about a file name it.
 //! Files that are written in one go ([`write_npz`], [`write_npy`], [`write_png`]) are written
-//! atomically: into a temporary file `.{filename}.tmp-{pid}` in the same directory, which is
-//! flushed to disk and then renamed over the destination, so that readers never see a
-//! half-written file.
+//! atomically ([`phi_core::io::write_atomic`]): into a temporary file `.{filename}.tmp-{pid}` in
+//! the same directory, which is flushed to disk and then renamed over the destination, so that
+//! readers never see a half-written file.
 
-pub mod npz;
 pub mod render;
 
-use std::fs::File;
-use std::io::{BufWriter, Write};
+/// NumPy `.npy` arrays and `.npz` archives: [`phi_core::io::npz`], re-exported.
+pub mod npz {
+    pub use phi_core::io::npz::*;
+}
+
 use std::path::{Path, PathBuf};
 
 pub use npz::{
-    ArrayData, NpyArray, read_npy, read_npy_bytes, read_npz, write_npy, write_npy_bytes, write_npz,
+    ArrayData, NpyArray, NpzReader, NpzWriter, read_npy, read_npy_bytes, read_npz, write_npy,
+    write_npy_bytes, write_npz, write_npz_streamed,
 };
+pub use phi_core::io::IoError;
+pub(crate) use phi_core::io::write_atomic;
 pub use render::{
     DEPTH_LEVELS, FrameStyle, GifWriter, KIND_LIQUID, KIND_OBSTACLE, RgbImage, render_frame,
     write_png,
@@ -40,38 +46,9 @@ pub enum OutputError {
         #[source]
         source: std::io::Error,
     },
-    /// A file exists but its content is not valid: truncated, damaged or not of the expected
-    /// format.
-    #[error("'{path}' is corrupt or truncated: {reason}", path = path.display())]
-    Corrupt {
-        /// The file that was read.
-        path: PathBuf,
-        /// What is wrong with it.
-        reason: String,
-    },
-    /// A file (or in-memory buffer) is valid but uses a feature that this module does not
-    /// support, such as an unsupported dtype or ZIP compression method.
-    #[error("'{path}': unsupported: {reason}", path = path.display())]
-    Unsupported {
-        /// The file that was read (`<memory>` for in-memory buffers).
-        path: PathBuf,
-        /// What is not supported.
-        reason: String,
-    },
-    /// An in-memory `.npy` buffer given to [`read_npy_bytes`] is invalid.
-    #[error("invalid .npy data: {reason}")]
-    InvalidNpy {
-        /// What is wrong with it.
-        reason: String,
-    },
-    /// An array's shape does not match the number of elements of its data.
-    #[error("array shape {shape:?} does not fit data of {len} elements")]
-    ShapeMismatch {
-        /// The shape.
-        shape: Vec<usize>,
-        /// The number of elements in the data.
-        len: usize,
-    },
+    /// Reading or writing a NumPy file failed ([`phi_core::io`]); the error names the file.
+    #[error(transparent)]
+    File(#[from] IoError),
     /// The arguments of a function are inconsistent (wrong lengths, empty domain, ...).
     #[error("invalid input: {0}")]
     InvalidInput(String),
@@ -104,86 +81,6 @@ impl OutputError {
             source,
         }
     }
-
-    /// A [`OutputError::Corrupt`] error for `path`.
-    pub(crate) fn corrupt(path: &Path, reason: impl Into<String>) -> Self {
-        OutputError::Corrupt {
-            path: path.to_path_buf(),
-            reason: reason.into(),
-        }
-    }
-}
-
-/// The temporary file used by [`write_atomic`] for `path`: `.{filename}.tmp-{pid}` in the same
-/// directory.
-fn temp_path(path: &Path) -> Result<PathBuf, OutputError> {
-    let name = path.file_name().ok_or_else(|| {
-        OutputError::InvalidInput(format!("'{}' does not name a file", path.display()))
-    })?;
-    let mut temp_name = std::ffi::OsString::from(".");
-    temp_name.push(name);
-    temp_name.push(format!(".tmp-{}", std::process::id()));
-    Ok(path.with_file_name(temp_name))
-}
-
-/// Writes a file atomically: `write` fills a temporary file in the destination's directory,
-/// which is then flushed, synced to disk and renamed to `path`. On failure the temporary file is
-/// removed and `path` is left untouched.
-///
-/// The temporary name depends only on the process id, so two threads of one process must not
-/// write the same destination at the same time.
-pub(crate) fn write_atomic(
-    path: &Path,
-    write: impl FnOnce(&mut BufWriter<File>) -> Result<(), OutputError>,
-) -> Result<(), OutputError> {
-    let temp = temp_path(path)?;
-    let result = (|| {
-        let file = File::create(&temp).map_err(|e| OutputError::io(&temp, "cannot create", e))?;
-        let mut writer = BufWriter::new(file);
-        write(&mut writer)?;
-        let file = writer
-            .into_inner()
-            .map_err(|e| OutputError::io(&temp, "cannot write", e.into_error()))?;
-        file.sync_all()
-            .map_err(|e| OutputError::io(&temp, "cannot sync", e))?;
-        drop(file);
-        std::fs::rename(&temp, path)
-            .map_err(|e| OutputError::io(path, "cannot rename a temporary file to", e))
-    })();
-    match result {
-        Ok(()) => {
-            sync_parent_dir(path);
-            Ok(())
-        }
-        Err(err) => {
-            // Best effort: the temporary file may not even exist.
-            let _ = std::fs::remove_file(&temp);
-            Err(err)
-        }
-    }
-}
-
-/// Best effort: syncs the directory holding `path` so that a rename survives a power loss.
-/// Errors are ignored (not every platform lets directories be opened or synced).
-fn sync_parent_dir(path: &Path) {
-    #[cfg(unix)]
-    {
-        let parent = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
-        if let Ok(dir) = File::open(parent) {
-            let _ = dir.sync_all();
-        }
-    }
-    #[cfg(not(unix))]
-    let _ = path;
-}
-
-/// Writes all of `bytes`, mapping errors to [`OutputError::Io`] naming `path`.
-pub(crate) fn write_all(w: &mut impl Write, bytes: &[u8], path: &Path) -> Result<(), OutputError> {
-    w.write_all(bytes)
-        .map_err(|e| OutputError::io(path, "cannot write", e))
 }
 
 #[cfg(test)]
@@ -197,45 +94,5 @@ pub(crate) mod test_util {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).expect("create test directory");
         dir
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn atomic_write_replaces_file_and_leaves_no_temp() {
-        let dir = test_util::temp_dir("atomic");
-        let path = dir.join("out.bin");
-        std::fs::write(&path, b"old").unwrap();
-        write_atomic(&path, |w| write_all(w, b"new", &path)).unwrap();
-        assert_eq!(std::fs::read(&path).unwrap(), b"new");
-        let names: Vec<_> = std::fs::read_dir(&dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name())
-            .collect();
-        assert_eq!(names, vec![std::ffi::OsString::from("out.bin")]);
-        let _ = std::fs::remove_dir_all(&dir);
-    }
-
-    #[test]
-    fn failed_atomic_write_keeps_old_file() {
-        let dir = test_util::temp_dir("atomic-fail");
-        let path = dir.join("out.bin");
-        std::fs::write(&path, b"old").unwrap();
-        let err = write_atomic(&path, |_| Err(OutputError::InvalidInput("boom".into())));
-        assert!(err.is_err());
-        assert_eq!(std::fs::read(&path).unwrap(), b"old");
-        assert!(!temp_path(&path).unwrap().exists());
-        let _ = std::fs::remove_dir_all(&dir);
-    }
-
-    #[test]
-    fn io_errors_name_the_path() {
-        let path = Path::new("/nonexistent-dir-for-phi-tests/x.npz");
-        let err = write_atomic(path, |_| Ok(())).unwrap_err();
-        let msg = err.to_string();
-        assert!(msg.contains("/nonexistent-dir-for-phi-tests/"), "{msg}");
     }
 }

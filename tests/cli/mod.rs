@@ -5,6 +5,9 @@ use std::process::Command;
 
 use phi::output::read_npz;
 
+mod dataset;
+mod optimize;
+
 fn phi() -> Command {
     Command::new(env!("CARGO_BIN_EXE_phi"))
 }

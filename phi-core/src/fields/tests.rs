@@ -189,8 +189,16 @@ fn fused_extrapolation_matches_the_composite_bit_for_bit() {
             };
             assert_eq!(fused_v.shape(), plain_v.shape(), "{shape:?}");
             assert_eq!(fused_k.shape(), plain_k.shape(), "{shape:?}");
-            assert_eq!(as_bits(&fused_v), as_bits(&plain_v), "{shape:?}, {cells} cells");
-            assert_eq!(as_bits(&fused_k), as_bits(&plain_k), "{shape:?}, {cells} cells");
+            assert_eq!(
+                as_bits(&fused_v),
+                as_bits(&plain_v),
+                "{shape:?}, {cells} cells"
+            );
+            assert_eq!(
+                as_bits(&fused_k),
+                as_bits(&plain_k),
+                "{shape:?}, {cells} cells"
+            );
             if cells == 3 {
                 let grown = fused_k.iter().filter(|&&x| x == 1.0).count();
                 let before = mask.iter().filter(|&&x| x == 1.0).count();

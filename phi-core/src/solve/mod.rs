@@ -34,7 +34,7 @@ mod poisson;
 mod sparse;
 
 pub use native::{adjoint_solve_f32, solve, solve_f32, solve_transpose, solve_transpose_f32};
-pub use poisson::{PoissonSystem, Weight, all_faces_open, nested_dissection, poisson_matrix};
+pub use poisson::{PoissonSystem, Weight, all_faces_open, grid_elimination_order, poisson_matrix};
 pub use sparse::SparseMatrix;
 
 use thiserror::Error;

@@ -25,7 +25,7 @@ pub(crate) enum CholeskyFactor {
     /// `P A Pᵀ = L Lᵀ` in the matrix's own elimination order (`order[k]`: the row eliminated
     /// `k`-th), through faer's symbolic and numeric factorizations with the identity ordering.
     Ordered {
-        symbolic: SymbolicCholesky<usize>,
+        symbolic: Box<SymbolicCholesky<usize>>,
         values: Vec<f64>,
         order: Arc<[usize]>,
     },
@@ -365,7 +365,7 @@ fn ordered_cholesky(
         )
         .map_err(|e| failed(format!("{e} (is the matrix positive definite?)")))?;
     Ok(CholeskyFactor::Ordered {
-        symbolic,
+        symbolic: Box::new(symbolic),
         values: factor,
         order,
     })

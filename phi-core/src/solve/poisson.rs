@@ -331,11 +331,12 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
     }
     let mut matrix = SparseMatrix::from_csr(n, n, row_ptr, col_indices, values)?.assume_symmetric();
     if d <= 2 {
-        // Eliminate in the grid's nested-dissection order restricted to the liquid cells: in 2D
-        // a fill-reducing order within 1.5× of AMD's fill, known before the matrix is, which
-        // saves the AMD analysis (as costly as the factorization of a matrix used once). 3D
-        // keeps AMD: a box's nested dissection fills 1.5× more there.
-        let order: Vec<usize> = nested_dissection(resolution)
+        // Eliminate in the grid's AMD order restricted to the liquid cells: in 2D its fill stays
+        // within 1.25× of an AMD analysis of this matrix (measured 1.14–1.17× on pools), and it
+        // saves that analysis, which costs as much as factorising a matrix used once. 3D keeps
+        // the per-matrix AMD (the restricted order filled 1.7× more at 16³; 3D uses CG by
+        // default anyway).
+        let order: Vec<usize> = grid_elimination_order(resolution)
             .iter()
             .filter_map(|&cell| cell_to_unknown[cell as usize])
             .collect();
@@ -351,80 +352,71 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
     })
 }
 
-/// The cells of a grid of `resolution` (row-major indices) in nested-dissection order: split the
-/// box across its longest axis, order the two halves recursively, then the separating layer.
-/// Eliminating cells in this order keeps the Cholesky factor of a grid Laplacian small
-/// (`O(n log n)` entries in 2D), like AMD, but needs no look at the matrix, so it is computed once
-/// per resolution and cached.
-pub fn nested_dissection(resolution: &[usize]) -> Arc<[u32]> {
-    static CACHE: OnceLock<Mutex<HashMap<Vec<usize>, Arc<[u32]>>>> = OnceLock::new();
+/// A fill-reducing elimination order of the cells of a grid of `resolution` (row-major cell
+/// indices): faer's approximate minimum degree (AMD) ordering of the grid's `2d + 1`-point
+/// stencil, computed once per resolution and cached. Restricted to the liquid cells of a step it
+/// orders that step's Poisson matrix nearly as well as an AMD analysis of the matrix itself,
+/// which for a matrix used once costs as much as its factorization.
+pub fn grid_elimination_order(resolution: &[usize]) -> Arc<[u32]> {
+    type OrderCache = Mutex<HashMap<Vec<usize>, Arc<[u32]>>>;
+    static CACHE: OnceLock<OrderCache> = OnceLock::new();
     let cache = CACHE.get_or_init(Default::default);
     if let Some(order) = cache.lock().ok().and_then(|c| c.get(resolution).cloned()) {
         return order;
     }
-    let strides = strides(resolution);
-    let mut order = Vec::with_capacity(resolution.iter().product());
-    let lo = vec![0; resolution.len()];
-    dissect(&lo, resolution, &strides, &mut order);
-    let order: Arc<[u32]> = order.into();
+    let order: Arc<[u32]> = stencil_amd(resolution).into();
     if let Ok(mut c) = cache.lock() {
         c.insert(resolution.to_vec(), order.clone());
     }
     order
 }
 
-/// Appends the cells of the box `[lo, hi)` in nested-dissection order.
-fn dissect(lo: &[usize], hi: &[usize], strides: &[usize], order: &mut Vec<u32>) {
-    let extent: Vec<usize> = lo
-        .iter()
-        .zip(hi)
-        .map(|(l, h)| h.saturating_sub(*l))
-        .collect();
-    let cells: usize = extent.iter().product();
-    if cells == 0 {
-        return;
-    }
-    let (axis, &longest) = extent
-        .iter()
-        .enumerate()
-        .max_by_key(|&(a, &e)| (e, std::cmp::Reverse(a)))
-        .expect("a grid has at least one axis");
-    if cells <= 8 || longest < 3 {
-        append_box(lo, hi, strides, order);
-        return;
-    }
-    let middle = lo[axis] + longest / 2;
-    let mut left_hi = hi.to_vec();
-    left_hi[axis] = middle;
-    let mut right_lo = lo.to_vec();
-    right_lo[axis] = middle + 1;
-    dissect(lo, &left_hi, strides, order);
-    dissect(&right_lo, hi, strides, order);
-    let mut separator_lo = lo.to_vec();
-    separator_lo[axis] = middle;
-    let mut separator_hi = hi.to_vec();
-    separator_hi[axis] = middle + 1;
-    dissect(&separator_lo, &separator_hi, strides, order);
-}
+/// AMD of the full pattern of the grid's `2d + 1`-point stencil.
+fn stencil_amd(resolution: &[usize]) -> Vec<u32> {
+    use faer::dyn_stack::{MemBuffer, MemStack};
+    use faer::sparse::SymbolicSparseColMatRef;
+    use faer::sparse::linalg::amd;
 
-/// Appends the cells of the box `[lo, hi)` in row-major order.
-fn append_box(lo: &[usize], hi: &[usize], strides: &[usize], order: &mut Vec<u32>) {
-    let d = lo.len();
-    let mut index = lo.to_vec();
-    loop {
-        let cell: usize = index.iter().zip(strides).map(|(i, s)| i * s).sum();
-        order.push(cell as u32);
-        let mut axis = d;
-        loop {
-            if axis == 0 {
-                return;
-            }
-            axis -= 1;
-            index[axis] += 1;
-            if index[axis] < hi[axis] {
-                break;
-            }
-            index[axis] = lo[axis];
+    let cells: usize = resolution.iter().product();
+    let strides = strides(resolution);
+    let mut col_ptr = Vec::with_capacity(cells + 1);
+    let mut row_idx = Vec::with_capacity(cells * (2 * resolution.len() + 1));
+    col_ptr.push(0);
+    let mut index = vec![0usize; resolution.len()];
+    for cell in 0..cells {
+        let mut rest = cell;
+        for (axis, &stride) in strides.iter().enumerate() {
+            index[axis] = rest / stride;
+            rest %= stride;
         }
+        // Sorted: lower neighbours (largest stride first), the cell, upper neighbours.
+        for (axis, &stride) in strides.iter().enumerate() {
+            if index[axis] > 0 {
+                row_idx.push(cell - stride);
+            }
+        }
+        row_idx.push(cell);
+        for (axis, &stride) in strides.iter().enumerate().rev() {
+            if index[axis] + 1 < resolution[axis] {
+                row_idx.push(cell + stride);
+            }
+        }
+        col_ptr.push(row_idx.len());
+    }
+    let pattern = SymbolicSparseColMatRef::new_checked(cells, cells, &col_ptr, None, &row_idx);
+    let mut perm = vec![0usize; cells];
+    let mut perm_inv = vec![0usize; cells];
+    let mut scratch = MemBuffer::new(amd::order_scratch::<usize>(cells, row_idx.len()));
+    let ordered = amd::order(
+        &mut perm,
+        &mut perm_inv,
+        pattern,
+        amd::Control::default(),
+        MemStack::new(&mut scratch),
+    );
+    match ordered {
+        Ok(_) => perm.into_iter().map(|c| c as u32).collect(),
+        // Only an index overflow can fail: fall back to the natural order.
+        Err(_) => (0..cells as u32).collect(),
     }
 }

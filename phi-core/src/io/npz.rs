@@ -18,10 +18,10 @@
 
 use std::fs::File;
 use std::io::{self, BufReader, Read, Seek, SeekFrom, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};
 
-use super::{OutputError, write_all, write_atomic};
+use super::{IoError, write_all, write_atomic};
 
 /// The elements of an array, in C (row-major) order.
 #[derive(Debug, Clone, PartialEq)]
@@ -137,7 +137,7 @@ fn element_count(shape: &[usize]) -> Option<usize> {
 
 impl NpyArray {
     /// An array of the given shape; fails unless the shape's product equals the data's length.
-    pub fn new(shape: Vec<usize>, data: impl Into<ArrayData>) -> Result<Self, OutputError> {
+    pub fn new(shape: Vec<usize>, data: impl Into<ArrayData>) -> Result<Self, IoError> {
         let array = NpyArray {
             shape,
             data: data.into(),
@@ -156,11 +156,11 @@ impl NpyArray {
     }
 
     /// Checks that the shape's product equals the data's length.
-    pub fn validate(&self) -> Result<(), OutputError> {
+    pub fn validate(&self) -> Result<(), IoError> {
         if element_count(&self.shape) == Some(self.data.len()) {
             Ok(())
         } else {
-            Err(OutputError::ShapeMismatch {
+            Err(IoError::ShapeMismatch {
                 shape: self.shape.clone(),
                 len: self.data.len(),
             })
@@ -273,20 +273,20 @@ fn npy_header(array: &NpyArray) -> Vec<u8> {
 /// `shape`) padded with spaces and a final `'\n'` so that the data starts at a multiple of 64
 /// bytes, then the elements in little-endian C order.
 ///
-/// Fails with [`OutputError::ShapeMismatch`] when the shape does not fit the data.
-pub fn write_npy_bytes(array: &NpyArray) -> Result<Vec<u8>, OutputError> {
+/// Fails with [`IoError::ShapeMismatch`] when the shape does not fit the data.
+pub fn write_npy_bytes(array: &NpyArray) -> Result<Vec<u8>, IoError> {
     array.validate()?;
     let mut out = npy_header(array);
     out.reserve(array.data.len() * array.data.item_size());
     array.data.for_each_le_chunk(|chunk| {
         out.extend_from_slice(chunk);
-        Ok::<(), OutputError>(())
+        Ok::<(), IoError>(())
     })?;
     Ok(out)
 }
 
 /// Writes `array` to the `.npy` file `path` (see [`write_npy_bytes`]), atomically.
-pub fn write_npy(path: impl AsRef<Path>, array: &NpyArray) -> Result<(), OutputError> {
+pub fn write_npy(path: impl AsRef<Path>, array: &NpyArray) -> Result<(), IoError> {
     let path = path.as_ref();
     array.validate()?;
     write_atomic(path, |w| {
@@ -575,7 +575,24 @@ fn fortran_to_c<T: Copy>(data: Vec<T>, shape: &[usize]) -> Vec<T> {
     out
 }
 
-fn parse_npy(bytes: &[u8]) -> Result<NpyArray, NpyIssue> {
+/// The parsed header of a `.npy` buffer.
+struct ParsedHeader {
+    descr: String,
+    dtype: Dtype,
+    big_endian: bool,
+    fortran_order: bool,
+    shape: Vec<usize>,
+    /// Where the data starts (the length of magic, version and header).
+    data_start: usize,
+}
+
+/// The length of the `.npy` preamble (magic, version and header length) that tells how long the
+/// header is: 10 bytes for version 1, 12 for versions 2 and 3.
+const NPY_PREAMBLE_MAX: usize = 12;
+
+/// Parses the magic string, version and header of a `.npy` buffer; `bytes` may stop anywhere
+/// after the header.
+fn parse_npy_header(bytes: &[u8]) -> Result<ParsedHeader, NpyIssue> {
     if bytes.len() < 10 || &bytes[..6] != NPY_MAGIC {
         return Err(invalid("missing the .npy magic string"));
     }
@@ -611,6 +628,25 @@ fn parse_npy(bytes: &[u8]) -> Result<NpyArray, NpyIssue> {
         _ => return Err(invalid("header: invalid 'descr'")),
     };
     let (dtype, big_endian) = parse_descr(&descr)?;
+    Ok(ParsedHeader {
+        descr,
+        dtype,
+        big_endian,
+        fortran_order,
+        shape,
+        data_start,
+    })
+}
+
+fn parse_npy(bytes: &[u8]) -> Result<NpyArray, NpyIssue> {
+    let ParsedHeader {
+        descr,
+        dtype,
+        big_endian,
+        fortran_order,
+        shape,
+        data_start,
+    } = parse_npy_header(bytes)?;
     let count =
         element_count(&shape).ok_or_else(|| invalid(format!("shape {shape:?} is too large")))?;
     let item_size = match dtype {
@@ -667,22 +703,22 @@ fn parse_npy(bytes: &[u8]) -> Result<NpyArray, NpyIssue> {
 ///
 /// Accepts the dtypes of [`ArrayData`] in either byte order, `bool` (read as
 /// [`ArrayData::U8`]) and Fortran order (converted to C order). Fails with
-/// [`OutputError::InvalidNpy`] when the buffer is not valid `.npy` data, is truncated or uses an
+/// [`IoError::InvalidNpy`] when the buffer is not valid `.npy` data, is truncated or uses an
 /// unsupported dtype.
-pub fn read_npy_bytes(bytes: &[u8]) -> Result<NpyArray, OutputError> {
+pub fn read_npy_bytes(bytes: &[u8]) -> Result<NpyArray, IoError> {
     parse_npy(bytes).map_err(|issue| match issue {
-        NpyIssue::Invalid(reason) => OutputError::InvalidNpy { reason },
-        NpyIssue::Unsupported(reason) => OutputError::InvalidNpy {
+        NpyIssue::Invalid(reason) => IoError::InvalidNpy { reason },
+        NpyIssue::Unsupported(reason) => IoError::InvalidNpy {
             reason: format!("unsupported: {reason}"),
         },
     })
 }
 
-/// Maps a decoding issue of the array `what` in the file `path` to an [`OutputError`].
-fn npy_issue_error(path: &Path, what: &str, issue: NpyIssue) -> OutputError {
+/// Maps a decoding issue of the array `what` in the file `path` to an [`IoError`].
+fn npy_issue_error(path: &Path, what: &str, issue: NpyIssue) -> IoError {
     match issue {
-        NpyIssue::Invalid(reason) => OutputError::corrupt(path, format!("{what}: {reason}")),
-        NpyIssue::Unsupported(reason) => OutputError::Unsupported {
+        NpyIssue::Invalid(reason) => IoError::corrupt(path, format!("{what}: {reason}")),
+        NpyIssue::Unsupported(reason) => IoError::Unsupported {
             path: path.to_path_buf(),
             reason: format!("{what}: {reason}"),
         },
@@ -690,9 +726,9 @@ fn npy_issue_error(path: &Path, what: &str, issue: NpyIssue) -> OutputError {
 }
 
 /// Reads the `.npy` file `path` (see [`read_npy_bytes`]).
-pub fn read_npy(path: impl AsRef<Path>) -> Result<NpyArray, OutputError> {
+pub fn read_npy(path: impl AsRef<Path>) -> Result<NpyArray, IoError> {
     let path = path.as_ref();
-    let bytes = std::fs::read(path).map_err(|e| OutputError::io(path, "cannot read", e))?;
+    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, "cannot read", e))?;
     parse_npy(&bytes).map_err(|issue| npy_issue_error(path, "array", issue))
 }
 
@@ -781,41 +817,74 @@ struct WrittenEntry {
     offset: u64,
 }
 
-/// Writes the `.npz` (ZIP) archive to `w`. With `force_zip64`, every ZIP64 field is written even
-/// when not needed (tests use this to exercise the ZIP64 code on small files).
-fn write_zip(
-    w: &mut impl Write,
-    entries: &[(&str, &NpyArray)],
-    path: &Path,
+/// Writes a `.npz` archive one array at a time, so that an archive larger than memory can be
+/// written: each [`NpzWriter::add`] writes one STORED entry, and the central directory (a few
+/// dozen bytes per entry) is kept until the end. Get one from [`write_npz_streamed`].
+pub struct NpzWriter<'a> {
+    w: &'a mut dyn Write,
+    path: &'a Path,
     force_zip64: bool,
-) -> Result<(), OutputError> {
-    let (time, date) = dos_time_date(SystemTime::now());
-    let mut pos = 0u64;
-    let mut written = Vec::with_capacity(entries.len());
-    let too_large =
-        || OutputError::InvalidInput(format!("'{}': archive too large", path.display()));
+    time: u16,
+    date: u16,
+    pos: u64,
+    written: Vec<WrittenEntry>,
+    names: std::collections::HashSet<String>,
+}
 
-    for &(name, array) in entries {
+impl<'a> NpzWriter<'a> {
+    fn new(w: &'a mut dyn Write, path: &'a Path, force_zip64: bool) -> Self {
+        // Entries carry a fixed date (1980-01-01, the earliest a ZIP can hold), so the same
+        // arrays always give the same bytes.
+        let (time, date) = dos_time_date(UNIX_EPOCH);
+        NpzWriter {
+            w,
+            path,
+            force_zip64,
+            time,
+            date,
+            pos: 0,
+            written: Vec::new(),
+            names: std::collections::HashSet::new(),
+        }
+    }
+
+    fn too_large(&self) -> IoError {
+        IoError::InvalidInput(format!("'{}': archive too large", self.path.display()))
+    }
+
+    /// Appends the array `array` as the entry `name.npy`.
+    ///
+    /// Fails on an empty, too long or repeated name, on an array whose shape does not fit its
+    /// data, and on I/O errors (naming the path).
+    pub fn add(&mut self, name: &str, array: &NpyArray) -> Result<(), IoError> {
+        check_entry(name, array, self.path)?;
+        if !self.names.insert(name.to_string()) {
+            return Err(IoError::InvalidInput(format!(
+                "'{}': array name '{name}' appears twice",
+                self.path.display()
+            )));
+        }
         let header = npy_header(array);
-        let size = array.npy_size(&header).ok_or_else(too_large)?;
+        let size = array.npy_size(&header).ok_or_else(|| self.too_large())?;
+        let (w, path) = (&mut *self.w, self.path);
         let mut hasher = crc32fast::Hasher::new();
         hasher.update(&header);
         array.data.for_each_le_chunk(|chunk| {
             hasher.update(chunk);
-            Ok::<(), OutputError>(())
+            Ok::<(), IoError>(())
         })?;
         let crc = hasher.finalize();
 
         let name = format!("{name}.npy").into_bytes();
         let flags = if name.is_ascii() { 0 } else { FLAG_UTF8 };
-        let zip64 = force_zip64 || size >= U32_MAX;
+        let zip64 = self.force_zip64 || size >= U32_MAX;
         let mut local = Vec::with_capacity(30 + name.len() + 20);
         local.u32(LOCAL_HEADER_SIG);
         local.u16(if zip64 { VERSION_ZIP64 } else { VERSION_PLAIN });
         local.u16(flags);
         local.u16(METHOD_STORED);
-        local.u16(time);
-        local.u16(date);
+        local.u16(self.time);
+        local.u16(self.date);
         local.u32(crc);
         let size32 = if zip64 { U32_MAX as u32 } else { size as u32 };
         local.u32(size32); // compressed size
@@ -835,138 +904,203 @@ fn write_zip(
             .data
             .for_each_le_chunk(|chunk| write_all(w, chunk, path))?;
 
-        written.push(WrittenEntry {
+        self.written.push(WrittenEntry {
             name,
             flags,
             crc,
             size,
-            offset: pos,
+            offset: self.pos,
         });
-        pos = (local.len() as u64)
+        self.pos = (local.len() as u64)
             .checked_add(size)
-            .and_then(|n| n.checked_add(pos))
-            .ok_or_else(too_large)?;
+            .and_then(|n| n.checked_add(self.pos))
+            .ok_or_else(|| self.too_large())?;
+        Ok(())
     }
 
-    let cd_offset = pos;
-    let mut cd = Vec::new();
-    for entry in &written {
-        let big_size = force_zip64 || entry.size >= U32_MAX;
-        let big_offset = force_zip64 || entry.offset >= U32_MAX;
-        let mut extra = Vec::new();
-        if big_size {
-            extra.u64(entry.size); // uncompressed
-            extra.u64(entry.size); // compressed
+    /// Writes the central directory and the end records.
+    fn finish(self) -> Result<(), IoError> {
+        let (time, date, force_zip64) = (self.time, self.date, self.force_zip64);
+        let (w, path) = (self.w, self.path);
+        let too_large =
+            || IoError::InvalidInput(format!("'{}': archive too large", path.display()));
+        let written = self.written;
+        let cd_offset = self.pos;
+        let mut cd = Vec::new();
+        for entry in &written {
+            let big_size = force_zip64 || entry.size >= U32_MAX;
+            let big_offset = force_zip64 || entry.offset >= U32_MAX;
+            let mut extra = Vec::new();
+            if big_size {
+                extra.u64(entry.size); // uncompressed
+                extra.u64(entry.size); // compressed
+            }
+            if big_offset {
+                extra.u64(entry.offset);
+            }
+            cd.u32(CENTRAL_HEADER_SIG);
+            cd.u16(VERSION_MADE_BY);
+            cd.u16(if big_size || big_offset {
+                VERSION_ZIP64
+            } else {
+                VERSION_PLAIN
+            });
+            cd.u16(entry.flags);
+            cd.u16(METHOD_STORED);
+            cd.u16(time);
+            cd.u16(date);
+            cd.u32(entry.crc);
+            let size32 = if big_size {
+                U32_MAX as u32
+            } else {
+                entry.size as u32
+            };
+            cd.u32(size32);
+            cd.u32(size32);
+            cd.u16(entry.name.len() as u16);
+            cd.u16(if extra.is_empty() {
+                0
+            } else {
+                extra.len() as u16 + 4
+            });
+            cd.u16(0); // comment length
+            cd.u16(0); // disk number start
+            cd.u16(0); // internal attributes
+            cd.u32(EXTERNAL_ATTRIBUTES);
+            cd.u32(if big_offset {
+                U32_MAX as u32
+            } else {
+                entry.offset as u32
+            });
+            cd.extend_from_slice(&entry.name);
+            if !extra.is_empty() {
+                cd.u16(ZIP64_EXTRA_ID);
+                cd.u16(extra.len() as u16);
+                cd.extend_from_slice(&extra);
+            }
         }
-        if big_offset {
-            extra.u64(entry.offset);
+        let cd_size = cd.len() as u64;
+        let count = written.len() as u64;
+        let zip64_end =
+            force_zip64 || count >= U16_MAX || cd_size >= U32_MAX || cd_offset >= U32_MAX;
+        let mut end = Vec::new();
+        if zip64_end {
+            let zip64_eocd_offset = cd_offset.checked_add(cd_size).ok_or_else(too_large)?;
+            end.u32(ZIP64_EOCD_SIG);
+            end.u64(44); // size of the rest of the record
+            end.u16(VERSION_MADE_BY);
+            end.u16(VERSION_ZIP64);
+            end.u32(0); // this disk
+            end.u32(0); // disk of the central directory
+            end.u64(count);
+            end.u64(count);
+            end.u64(cd_size);
+            end.u64(cd_offset);
+            end.u32(ZIP64_LOCATOR_SIG);
+            end.u32(0); // disk of the ZIP64 end record
+            end.u64(zip64_eocd_offset);
+            end.u32(1); // number of disks
         }
-        cd.u32(CENTRAL_HEADER_SIG);
-        cd.u16(VERSION_MADE_BY);
-        cd.u16(if big_size || big_offset {
-            VERSION_ZIP64
+        let count16 = if zip64_end {
+            U16_MAX as u16
         } else {
-            VERSION_PLAIN
-        });
-        cd.u16(entry.flags);
-        cd.u16(METHOD_STORED);
-        cd.u16(time);
-        cd.u16(date);
-        cd.u32(entry.crc);
-        let size32 = if big_size {
-            U32_MAX as u32
-        } else {
-            entry.size as u32
+            count as u16
         };
-        cd.u32(size32);
-        cd.u32(size32);
-        cd.u16(entry.name.len() as u16);
-        cd.u16(if extra.is_empty() {
-            0
-        } else {
-            extra.len() as u16 + 4
-        });
-        cd.u16(0); // comment length
-        cd.u16(0); // disk number start
-        cd.u16(0); // internal attributes
-        cd.u32(EXTERNAL_ATTRIBUTES);
-        cd.u32(if big_offset {
+        end.u32(EOCD_SIG);
+        end.u16(0); // this disk
+        end.u16(0); // disk of the central directory
+        end.u16(count16);
+        end.u16(count16);
+        end.u32(if zip64_end {
             U32_MAX as u32
         } else {
-            entry.offset as u32
+            cd_size as u32
         });
-        cd.extend_from_slice(&entry.name);
-        if !extra.is_empty() {
-            cd.u16(ZIP64_EXTRA_ID);
-            cd.u16(extra.len() as u16);
-            cd.extend_from_slice(&extra);
-        }
+        end.u32(if zip64_end {
+            U32_MAX as u32
+        } else {
+            cd_offset as u32
+        });
+        end.u16(0); // comment length
+        write_all(w, &cd, path)?;
+        write_all(w, &end, path)
     }
-    let cd_size = cd.len() as u64;
-    let count = written.len() as u64;
-    let zip64_end = force_zip64 || count >= U16_MAX || cd_size >= U32_MAX || cd_offset >= U32_MAX;
-    let mut end = Vec::new();
-    if zip64_end {
-        let zip64_eocd_offset = cd_offset.checked_add(cd_size).ok_or_else(too_large)?;
-        end.u32(ZIP64_EOCD_SIG);
-        end.u64(44); // size of the rest of the record
-        end.u16(VERSION_MADE_BY);
-        end.u16(VERSION_ZIP64);
-        end.u32(0); // this disk
-        end.u32(0); // disk of the central directory
-        end.u64(count);
-        end.u64(count);
-        end.u64(cd_size);
-        end.u64(cd_offset);
-        end.u32(ZIP64_LOCATOR_SIG);
-        end.u32(0); // disk of the ZIP64 end record
-        end.u64(zip64_eocd_offset);
-        end.u32(1); // number of disks
+}
+
+/// Writes the arrays to `w` as a `.npz` (ZIP) archive. With `force_zip64`, every ZIP64 field is
+/// written even when not needed (tests use this to exercise the ZIP64 code on small files).
+fn write_zip(
+    w: &mut dyn Write,
+    entries: &[(&str, &NpyArray)],
+    path: &Path,
+    force_zip64: bool,
+) -> Result<(), IoError> {
+    let mut npz = NpzWriter::new(w, path, force_zip64);
+    for &(name, array) in entries {
+        npz.add(name, array)?;
     }
-    let count16 = if zip64_end {
-        U16_MAX as u16
-    } else {
-        count as u16
+    npz.finish()
+}
+
+/// Writes the `.npz` archive `path` atomically, array by array: `fill` calls
+/// [`NpzWriter::add`] for each array, and only one array needs to be in memory at a time.
+/// On any error (of `fill` or of writing) `path` is left untouched.
+///
+/// ```
+/// # let dir = std::env::temp_dir().join(format!("phi-doc-npz-streamed-{}", std::process::id()));
+/// # std::fs::create_dir_all(&dir).unwrap();
+/// use phi_core::io::npz::{NpyArray, read_npz, write_npz_streamed};
+/// let path = dir.join("many.npz");
+/// write_npz_streamed(&path, |npz| {
+///     for i in 0..3i64 {
+///         npz.add(&format!("a{i}"), &NpyArray::from_vec(vec![i]))?;
+///     }
+///     Ok::<(), phi_core::io::IoError>(())
+/// })?;
+/// assert_eq!(read_npz(&path)?.len(), 3);
+/// # std::fs::remove_dir_all(&dir).unwrap();
+/// # Ok::<(), phi_core::io::IoError>(())
+/// ```
+pub fn write_npz_streamed<E: From<IoError>>(
+    path: impl AsRef<Path>,
+    fill: impl FnOnce(&mut NpzWriter<'_>) -> Result<(), E>,
+) -> Result<(), E> {
+    let path = path.as_ref();
+    write_atomic(path, |w| {
+        let mut npz = NpzWriter::new(w, path, false);
+        fill(&mut npz)?;
+        npz.finish()?;
+        Ok(())
+    })
+}
+
+/// Checks one array and its name before it is written.
+fn check_entry(name: &str, array: &NpyArray, path: &Path) -> Result<(), IoError> {
+    let bad = |why: &str| {
+        IoError::InvalidInput(format!("'{}': array name '{name}' {why}", path.display()))
     };
-    end.u32(EOCD_SIG);
-    end.u16(0); // this disk
-    end.u16(0); // disk of the central directory
-    end.u16(count16);
-    end.u16(count16);
-    end.u32(if zip64_end {
-        U32_MAX as u32
-    } else {
-        cd_size as u32
-    });
-    end.u32(if zip64_end {
-        U32_MAX as u32
-    } else {
-        cd_offset as u32
-    });
-    end.u16(0); // comment length
-    write_all(w, &cd, path)?;
-    write_all(w, &end, path)
+    if name.is_empty() {
+        return Err(bad("is empty"));
+    }
+    if name.len() + 4 > usize::from(u16::MAX) {
+        return Err(bad("is too long"));
+    }
+    array
+        .validate()
+        .map_err(|e| IoError::InvalidInput(format!("'{}': array '{name}': {e}", path.display())))
 }
 
 /// Checks the arrays and their names before anything is written.
-fn check_entries(entries: &[(&str, &NpyArray)], path: &Path) -> Result<(), OutputError> {
+fn check_entries(entries: &[(&str, &NpyArray)], path: &Path) -> Result<(), IoError> {
     let mut seen = std::collections::HashSet::new();
     for &(name, array) in entries {
-        let bad = |why: &str| {
-            OutputError::InvalidInput(format!("'{}': array name '{name}' {why}", path.display()))
-        };
-        if name.is_empty() {
-            return Err(bad("is empty"));
-        }
-        if name.len() + 4 > usize::from(u16::MAX) {
-            return Err(bad("is too long"));
-        }
+        check_entry(name, array, path)?;
         if !seen.insert(name) {
-            return Err(bad("appears twice"));
+            return Err(IoError::InvalidInput(format!(
+                "'{}': array name '{name}' appears twice",
+                path.display()
+            )));
         }
-        array.validate().map_err(|e| {
-            OutputError::InvalidInput(format!("'{}': array '{name}': {e}", path.display()))
-        })?;
     }
     Ok(())
 }
@@ -981,7 +1115,7 @@ fn check_entries(entries: &[(&str, &NpyArray)], path: &Path) -> Result<(), Outpu
 pub fn write_npz<S: AsRef<str>>(
     path: impl AsRef<Path>,
     arrays: &[(S, &NpyArray)],
-) -> Result<(), OutputError> {
+) -> Result<(), IoError> {
     write_npz_impl(path.as_ref(), arrays, false)
 }
 
@@ -989,7 +1123,7 @@ fn write_npz_impl<S: AsRef<str>>(
     path: &Path,
     arrays: &[(S, &NpyArray)],
     force_zip64: bool,
-) -> Result<(), OutputError> {
+) -> Result<(), IoError> {
     let entries: Vec<(&str, &NpyArray)> = arrays
         .iter()
         .map(|(name, array)| (name.as_ref(), *array))
@@ -1048,18 +1182,18 @@ struct CentralEntry {
 }
 
 /// Random access to the archive file, turning short reads into "truncated" errors.
-struct Archive<'p> {
+struct Archive {
     reader: BufReader<File>,
     len: u64,
-    path: &'p Path,
+    path: PathBuf,
 }
 
-impl Archive<'_> {
-    fn read_at(&mut self, offset: u64, len: u64, what: &str) -> Result<Vec<u8>, OutputError> {
+impl Archive {
+    fn read_at(&mut self, offset: u64, len: u64, what: &str) -> Result<Vec<u8>, IoError> {
         let end = offset.checked_add(len);
         if end.is_none_or(|end| end > self.len) {
-            return Err(OutputError::corrupt(
-                self.path,
+            return Err(IoError::corrupt(
+                &self.path,
                 format!(
                     "{what} ({len} bytes at offset {offset}) extends past the end of the file \
                      ({} bytes)",
@@ -1074,20 +1208,20 @@ impl Archive<'_> {
             .and_then(|_| self.reader.read_exact(&mut buf))
             .map_err(|e| {
                 if e.kind() == io::ErrorKind::UnexpectedEof {
-                    OutputError::corrupt(self.path, format!("{what}: unexpected end of file"))
+                    IoError::corrupt(&self.path, format!("{what}: unexpected end of file"))
                 } else {
-                    OutputError::io(self.path, "cannot read", e)
+                    IoError::io(&self.path, "cannot read", e)
                 }
             })?;
         Ok(buf)
     }
 
-    fn corrupt(&self, reason: impl Into<String>) -> OutputError {
-        OutputError::corrupt(self.path, reason)
+    fn corrupt(&self, reason: impl Into<String>) -> IoError {
+        IoError::corrupt(&self.path, reason)
     }
 
     /// Finds the end records and returns (number of entries, central directory offset, size).
-    fn end_of_central_directory(&mut self) -> Result<(u64, u64, u64), OutputError> {
+    fn end_of_central_directory(&mut self) -> Result<(u64, u64, u64), IoError> {
         const EOCD_LEN: u64 = 22;
         if self.len < EOCD_LEN {
             return Err(self.corrupt(format!("{} bytes are too few for a ZIP archive", self.len)));
@@ -1114,7 +1248,7 @@ impl Archive<'_> {
             return Err(self.corrupt("short end-of-central-directory record"));
         };
         if disk != 0 || cd_disk != 0 {
-            return Err(OutputError::Unsupported {
+            return Err(IoError::Unsupported {
                 path: self.path.to_path_buf(),
                 reason: "multi-disk ZIP archives".into(),
             });
@@ -1155,7 +1289,7 @@ impl Archive<'_> {
         Ok((count, cd_offset, cd_size))
     }
 
-    fn central_directory(&mut self) -> Result<Vec<CentralEntry>, OutputError> {
+    fn central_directory(&mut self) -> Result<Vec<CentralEntry>, IoError> {
         let (count, cd_offset, cd_size) = self.end_of_central_directory()?;
         let cd = self.read_at(cd_offset, cd_size, "central directory")?;
         let mut f = Fields::new(&cd);
@@ -1165,7 +1299,7 @@ impl Archive<'_> {
                 self.corrupt(format!("central directory entry {index} is damaged"))
             })?;
             if entry.flags & 1 != 0 {
-                return Err(OutputError::Unsupported {
+                return Err(IoError::Unsupported {
                     path: self.path.to_path_buf(),
                     reason: format!("entry '{}' is encrypted", entry.entry.name),
                 });
@@ -1175,8 +1309,8 @@ impl Archive<'_> {
         Ok(entries)
     }
 
-    /// Reads, decompresses and checks the bytes of one entry.
-    fn entry_bytes(&mut self, entry: &CentralEntry) -> Result<Vec<u8>, OutputError> {
+    /// Checks the local header of `entry` and returns where its data starts.
+    fn data_offset(&mut self, entry: &CentralEntry) -> Result<u64, IoError> {
         let name = &entry.name;
         let local = self.read_at(entry.local_offset, 30, "local file header")?;
         let mut f = Fields::new(&local);
@@ -1198,7 +1332,13 @@ impl Archive<'_> {
                 String::from_utf8_lossy(&local_name)
             )));
         }
-        let data_offset = entry.local_offset + 30 + u64::from(name_len) + u64::from(extra_len);
+        Ok(entry.local_offset + 30 + u64::from(name_len) + u64::from(extra_len))
+    }
+
+    /// Reads, decompresses and checks the bytes of one entry.
+    fn entry_bytes(&mut self, entry: &CentralEntry) -> Result<Vec<u8>, IoError> {
+        let name = &entry.name;
+        let data_offset = self.data_offset(entry)?;
         let raw = self.read_at(
             data_offset,
             entry.compressed_size,
@@ -1246,7 +1386,7 @@ impl Archive<'_> {
                 out
             }
             method => {
-                return Err(OutputError::Unsupported {
+                return Err(IoError::Unsupported {
                     path: self.path.to_path_buf(),
                     reason: format!(
                         "entry '{name}' uses ZIP compression method {method} (only stored and \
@@ -1324,50 +1464,207 @@ fn parse_central_entry(f: &mut Fields<'_>) -> Option<ParsedCentralEntry> {
     })
 }
 
+/// The dtype and shape of an array, read from its `.npy` header by [`NpzReader::header`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NpyHeader {
+    /// The NumPy type descriptor, e.g. `"<f4"`.
+    pub descr: String,
+    /// The extent of each axis.
+    pub shape: Vec<usize>,
+}
+
+/// Random access to the arrays of one `.npz` archive: the central directory is read on
+/// [`NpzReader::open`], and [`NpzReader::read`] then reads (and CRC-checks) only the entry asked
+/// for, so a few small arrays of a large archive cost a few small reads.
+///
+/// ```
+/// # let dir = std::env::temp_dir().join(format!("phi-doc-npz-reader-{}", std::process::id()));
+/// # std::fs::create_dir_all(&dir).unwrap();
+/// use phi_core::io::npz::{NpyArray, NpzReader, write_npz};
+/// let path = dir.join("a.npz");
+/// let big = NpyArray::from_vec(vec![0f32; 1000]);
+/// let small = NpyArray::from_vec(vec![7i64]);
+/// write_npz(&path, &[("big", &big), ("small", &small)])?;
+/// let mut npz = NpzReader::open(&path)?;
+/// assert_eq!(npz.names().collect::<Vec<_>>(), ["big", "small"]);
+/// assert_eq!(npz.read("small")?.as_i64(), Some(&[7i64][..]));
+/// # std::fs::remove_dir_all(&dir).unwrap();
+/// # Ok::<(), phi_core::io::IoError>(())
+/// ```
+pub struct NpzReader {
+    archive: Archive,
+    /// The `.npy` entries (directory entries left out), in archive order.
+    entries: Vec<CentralEntry>,
+}
+
+impl NpzReader {
+    /// Opens the archive and reads its central directory.
+    ///
+    /// Fails with [`IoError::Corrupt`] (naming the file) on truncated or damaged archives,
+    /// [`IoError::Unsupported`] on entries that are not `.npy` arrays, and [`IoError::Io`] on I/O
+    /// errors.
+    pub fn open(path: impl AsRef<Path>) -> Result<Self, IoError> {
+        let path = path.as_ref();
+        let file = File::open(path).map_err(|e| IoError::io(path, "cannot open", e))?;
+        let len = file
+            .metadata()
+            .map_err(|e| IoError::io(path, "cannot read the metadata of", e))?
+            .len();
+        let mut archive = Archive {
+            reader: BufReader::new(file),
+            len,
+            path: path.to_path_buf(),
+        };
+        let mut entries = archive.central_directory()?;
+        // Directory entries hold nothing.
+        entries.retain(|entry| !entry.name.ends_with('/'));
+        if let Some(entry) = entries.iter().find(|e| !e.name.ends_with(".npy")) {
+            return Err(IoError::Unsupported {
+                path: path.to_path_buf(),
+                reason: format!("entry '{}' is not a .npy array", entry.name),
+            });
+        }
+        Ok(NpzReader { archive, entries })
+    }
+
+    /// The file this reader reads.
+    pub fn path(&self) -> &Path {
+        &self.archive.path
+    }
+
+    /// The names of the arrays (without the `.npy` suffix), in archive order.
+    pub fn names(&self) -> impl Iterator<Item = &str> {
+        self.entries
+            .iter()
+            .map(|entry| entry.name.strip_suffix(".npy").unwrap_or(&entry.name))
+    }
+
+    /// Whether the archive holds an array called `name`.
+    pub fn contains(&self, name: &str) -> bool {
+        self.names().any(|n| n == name)
+    }
+
+    /// Reads the array `name`, checking the entry's CRC-32.
+    ///
+    /// Fails with [`IoError::MissingArray`] when there is no such array, and otherwise as
+    /// [`read_npz`] does.
+    pub fn read(&mut self, name: &str) -> Result<NpyArray, IoError> {
+        let index = self
+            .names()
+            .position(|n| n == name)
+            .ok_or_else(|| IoError::MissingArray {
+                path: self.archive.path.clone(),
+                name: name.to_string(),
+            })?;
+        self.read_index(index)
+    }
+
+    /// Reads the `index`-th array in archive order.
+    fn read_index(&mut self, index: usize) -> Result<NpyArray, IoError> {
+        let entry = &self.entries[index];
+        let bytes = self.archive.entry_bytes(entry)?;
+        parse_npy(&bytes).map_err(|issue| {
+            npy_issue_error(
+                &self.archive.path,
+                &format!("entry '{}'", entry.name),
+                issue,
+            )
+        })
+    }
+
+    /// The dtype and shape of the array `name`, without reading its data when the entry is
+    /// stored (not compressed): only the `.npy` header is read, and the entry's size is checked
+    /// against it, but its CRC-32 is not (that needs all the data; [`NpzReader::read`] checks it).
+    pub fn header(&mut self, name: &str) -> Result<NpyHeader, IoError> {
+        let index = self.index_of(name)?;
+        let entry = &self.entries[index];
+        let what = format!("entry '{}'", entry.name);
+        let (prefix, size) = if entry.method == METHOD_STORED {
+            let offset = self.archive.data_offset(entry)?;
+            let size = entry.size;
+            let preamble = self.archive.read_at(
+                offset,
+                size.min(NPY_PREAMBLE_MAX as u64),
+                &format!("header of {what}"),
+            )?;
+            let header_end = match preamble.get(6..12) {
+                Some([1, _, a, b, ..]) => 10 + u64::from(u16::from_le_bytes([*a, *b])),
+                Some([2 | 3, _, a, b, c, d]) => {
+                    12 + u64::from(u32::from_le_bytes([*a, *b, *c, *d]))
+                }
+                _ => preamble.len() as u64,
+            };
+            let prefix =
+                self.archive
+                    .read_at(offset, header_end.min(size), &format!("header of {what}"))?;
+            (prefix, size)
+        } else {
+            let bytes = self.archive.entry_bytes(entry)?;
+            let size = bytes.len() as u64;
+            (bytes, size)
+        };
+        let path = &self.archive.path;
+        let parsed =
+            parse_npy_header(&prefix).map_err(|issue| npy_issue_error(path, &what, issue))?;
+        let item_size: u64 = match parsed.dtype {
+            Dtype::F32 | Dtype::I32 => 4,
+            Dtype::F64 | Dtype::I64 => 8,
+            Dtype::U8 | Dtype::Bool => 1,
+        };
+        let data_len = element_count(&parsed.shape)
+            .and_then(|n| (n as u64).checked_mul(item_size))
+            .and_then(|n| n.checked_add(parsed.data_start as u64));
+        if data_len != Some(size) {
+            return Err(IoError::corrupt(
+                path,
+                format!(
+                    "{what}: shape {:?} of '{}' does not fit the entry's {size} bytes",
+                    parsed.shape, parsed.descr
+                ),
+            ));
+        }
+        Ok(NpyHeader {
+            descr: parsed.descr,
+            shape: parsed.shape,
+        })
+    }
+
+    fn index_of(&self, name: &str) -> Result<usize, IoError> {
+        self.names()
+            .position(|n| n == name)
+            .ok_or_else(|| IoError::MissingArray {
+                path: self.archive.path.clone(),
+                name: name.to_string(),
+            })
+    }
+
+    /// Reads every array, in archive order, named without the `.npy` suffix.
+    pub fn read_all(&mut self) -> Result<Vec<(String, NpyArray)>, IoError> {
+        let names: Vec<String> = self.names().map(str::to_string).collect();
+        let mut arrays = Vec::with_capacity(names.len());
+        for (index, name) in names.into_iter().enumerate() {
+            arrays.push((name, self.read_index(index)?));
+        }
+        Ok(arrays)
+    }
+}
+
 /// Reads the `.npz` archive `path`: its arrays in archive order, named without the `.npy`
 /// suffix.
 ///
 /// Reads what [`write_npz`], `numpy.savez` and `numpy.savez_compressed` write: STORED or
 /// deflate-compressed entries, with or without ZIP64 extensions. Every entry's CRC-32 is checked.
-/// Fails with [`OutputError::Corrupt`] (naming the file) on truncated or damaged archives,
-/// [`OutputError::Unsupported`] on entries that are not `.npy` arrays of a supported dtype or use
-/// another compression method, and [`OutputError::Io`] on I/O errors.
-pub fn read_npz(path: impl AsRef<Path>) -> Result<Vec<(String, NpyArray)>, OutputError> {
-    let path = path.as_ref();
-    let file = File::open(path).map_err(|e| OutputError::io(path, "cannot open", e))?;
-    let len = file
-        .metadata()
-        .map_err(|e| OutputError::io(path, "cannot read the metadata of", e))?
-        .len();
-    let mut archive = Archive {
-        reader: BufReader::new(file),
-        len,
-        path,
-    };
-    let entries = archive.central_directory()?;
-    let mut arrays = Vec::with_capacity(entries.len());
-    for entry in &entries {
-        if entry.name.ends_with('/') {
-            continue; // A directory entry.
-        }
-        let Some(name) = entry.name.strip_suffix(".npy") else {
-            return Err(OutputError::Unsupported {
-                path: path.to_path_buf(),
-                reason: format!("entry '{}' is not a .npy array", entry.name),
-            });
-        };
-        let bytes = archive.entry_bytes(entry)?;
-        let array = parse_npy(&bytes)
-            .map_err(|issue| npy_issue_error(path, &format!("entry '{}'", entry.name), issue))?;
-        arrays.push((name.to_string(), array));
-    }
-    Ok(arrays)
+/// Fails with [`IoError::Corrupt`] (naming the file) on truncated or damaged archives,
+/// [`IoError::Unsupported`] on entries that are not `.npy` arrays of a supported dtype or use
+/// another compression method, and [`IoError::Io`] on I/O errors.
+pub fn read_npz(path: impl AsRef<Path>) -> Result<Vec<(String, NpyArray)>, IoError> {
+    NpzReader::open(path)?.read_all()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::output::test_util::temp_dir;
+    use crate::io::test_util::temp_dir;
     use std::process::Command;
 
     fn sample_arrays() -> Vec<(&'static str, NpyArray)> {
@@ -1413,7 +1710,7 @@ mod tests {
         assert!(NpyArray::new(vec![2, 3], vec![0f32; 6]).is_ok());
         let err = NpyArray::new(vec![2, 3], vec![0f32; 5]).unwrap_err();
         assert!(
-            matches!(err, OutputError::ShapeMismatch { len: 5, .. }),
+            matches!(err, IoError::ShapeMismatch { len: 5, .. }),
             "{err}"
         );
         assert!(NpyArray::new(vec![usize::MAX, 3], vec![0u8; 3]).is_err());
@@ -1589,7 +1886,7 @@ mod tests {
             let err = read_npz(&path).expect_err("a truncated archive must not load");
             let msg = err.to_string();
             assert!(msg.contains("trunc.npz"), "{msg}");
-            assert!(matches!(err, OutputError::Corrupt { .. }), "{msg}");
+            assert!(matches!(err, IoError::Corrupt { .. }), "{msg}");
         }
         let _ = std::fs::remove_dir_all(&dir);
     }
@@ -1803,6 +2100,75 @@ np.{func}({path:?},
             assert!(f.shape.is_empty());
             assert_eq!(f.as_u8().unwrap(), &[7]);
         }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn reader_reads_single_arrays_and_headers() {
+        let dir = temp_dir("npz-reader");
+        let arrays = sample_arrays();
+        for force_zip64 in [false, true] {
+            let path = dir.join(format!("r-{force_zip64}.npz"));
+            write_npz_impl(&path, &as_refs(&arrays), force_zip64).unwrap();
+            let mut npz = NpzReader::open(&path).unwrap();
+            let names: Vec<&str> = npz.names().collect();
+            assert_eq!(names, arrays.iter().map(|(n, _)| *n).collect::<Vec<_>>());
+            // Out of order, one at a time.
+            for (name, array) in arrays.iter().rev() {
+                assert_eq!(&npz.read(name).unwrap(), array);
+                let header = npz.header(name).unwrap();
+                assert_eq!(header.shape, array.shape);
+                assert_eq!(header.descr, array.data.descr());
+            }
+            assert!(npz.contains("i64") && !npz.contains("nope"));
+            let err = npz.read("nope").unwrap_err();
+            assert!(matches!(err, IoError::MissingArray { .. }), "{err}");
+            assert!(err.to_string().contains("r-"), "{err}");
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn header_checks_the_entry_size() {
+        let dir = temp_dir("npz-header-size");
+        let path = dir.join("h.npz");
+        let array = NpyArray::new(vec![4, 2], vec![1.5f32; 8]).unwrap();
+        write_npz(&path, &[("a", &array)]).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        // Claim a shape of (5, 2) in the header: same header length, wrong data size.
+        let at = bytes.windows(6).position(|w| w == b"(4, 2)").unwrap();
+        bytes[at + 1] = b'5';
+        std::fs::write(&path, &bytes).unwrap();
+        let err = NpzReader::open(&path).unwrap().header("a").unwrap_err();
+        assert!(matches!(err, IoError::Corrupt { .. }), "{err}");
+        assert!(err.to_string().contains("h.npz"), "{err}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn streamed_writing_matches_write_npz_and_is_atomic() {
+        let dir = temp_dir("npz-streamed");
+        let arrays = sample_arrays();
+        let (one_go, streamed) = (dir.join("one.npz"), dir.join("streamed.npz"));
+        write_npz(&one_go, &as_refs(&arrays)).unwrap();
+        write_npz_streamed(&streamed, |npz| {
+            for (name, array) in &arrays {
+                npz.add(name, array)?;
+            }
+            Ok::<(), IoError>(())
+        })
+        .unwrap();
+        assert_eq!(read_npz(&one_go).unwrap(), read_npz(&streamed).unwrap());
+
+        // A failure half-way leaves the old file in place and no temporary file.
+        let err = write_npz_streamed(&streamed, |npz| {
+            npz.add("x", &arrays[0].1)?;
+            npz.add("x", &arrays[1].1)
+        })
+        .unwrap_err();
+        assert!(err.to_string().contains("appears twice"), "{err}");
+        assert_eq!(read_npz(&streamed).unwrap().len(), arrays.len());
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 2);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

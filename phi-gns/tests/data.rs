@@ -1,0 +1,12 @@
+//! Integration tests of `phi_gns::data`: the one test binary of the crate, with modules by topic.
+
+#[path = "data/common.rs"]
+mod common;
+#[path = "data/dataset.rs"]
+mod dataset;
+#[path = "data/stats.rs"]
+mod stats;
+#[path = "data/tfrecord.rs"]
+mod tfrecord;
+#[path = "data/trajectory.rs"]
+mod trajectory;

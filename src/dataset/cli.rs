@@ -1,0 +1,292 @@
+//! The command-line form of `phi dataset ...` and `phi render` (parsed by clap in `main.rs`).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::{Args, Subcommand};
+use phi_flip::{RandomSceneParams, SceneVariant};
+
+use super::Split;
+use super::generate::{GenerateOptions, Shard, generate};
+use super::merge::merge;
+use super::render::render_trajectory;
+use super::stats::{StatsOptions, dataset_stats, format_report};
+
+/// `phi dataset <command>`.
+#[derive(Debug, Subcommand)]
+pub enum DatasetCommand {
+    /// Simulate the trajectories of a dataset (thesis section 5.2, table 5.1).
+    Generate(GenerateArgs),
+    /// Join shard directories into one dataset and write its metadata.json.
+    Merge {
+        /// The dataset directory to write.
+        out: PathBuf,
+        /// The shard directories (`phi dataset generate --shard k/n`).
+        #[arg(required = true)]
+        shards: Vec<PathBuf>,
+    },
+    /// Particle counts and the neighbour-count distribution over time (thesis fig. 5.4).
+    Stats {
+        /// The dataset directory.
+        dir: PathBuf,
+        /// The split (default: train if present).
+        #[arg(long)]
+        split: Option<String>,
+        /// Connectivity radius in stored units.
+        #[arg(long, default_value_t = 0.03)]
+        radius: f32,
+        /// Measure the first this many trajectories.
+        #[arg(long, default_value_t = 50)]
+        limit: usize,
+        /// Draw the distribution over time into this PNG.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Print every this many frames.
+        #[arg(long, default_value_t = 25)]
+        print_every: usize,
+    },
+    /// Write a dataset in another format: `npz` (one archive per split holding
+    /// `trajectory_{i}_position` and `trajectory_{i}_particle_type`, for numpy) or `tfrecord`
+    /// (DeepMind learning_to_simulate's `{split}.tfrecord` files and metadata.json).
+    Export {
+        /// The dataset directory.
+        dir: PathBuf,
+        /// `npz` or `tfrecord`.
+        #[arg(long)]
+        format: ExportFormat,
+        /// The directory to write into.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Read DeepMind learning_to_simulate's TFRecord files (`{split}.tfrecord` and
+    /// metadata.json) into a phi dataset directory.
+    Import {
+        /// The directory holding the TFRecord files and metadata.json.
+        input: PathBuf,
+        /// The dataset directory to write.
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+/// Formats of `phi dataset export`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ExportFormat {
+    /// One `.npz` per split.
+    Npz,
+    /// DeepMind's TFRecord files.
+    Tfrecord,
+}
+
+/// `phi dataset generate`.
+#[derive(Debug, Args)]
+pub struct GenerateArgs {
+    /// The dataset directory.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// `train`, `valid`, `test` or `all`.
+    #[arg(long, default_value = "all")]
+    pub split: String,
+    /// Trajectories per split (default: train 2000, valid 20, test 10; test has at most 10).
+    #[arg(long)]
+    pub count: Option<usize>,
+    /// The dataset seed; each split and trajectory derives its own from it.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// `obstacles`, or `walls` (walls as a ring of obstacle particles).
+    #[arg(long, default_value = "obstacles")]
+    pub variant: SceneVariant,
+    /// Table 5.1 as TOML (every key optional; unknown keys are errors).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Steps per trajectory (overrides the configuration; table: 400).
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// Worker threads (default: one per core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Make only the trajectories `i` with `i mod n = k`.
+    #[arg(long, default_value = "0/1")]
+    pub shard: Shard,
+    /// Continue in a directory whose generator.json differs or is missing.
+    #[arg(long)]
+    pub resume: bool,
+}
+
+/// `phi render`.
+#[derive(Debug, Args)]
+pub struct RenderArgs {
+    /// The dataset directory.
+    pub dataset: PathBuf,
+    /// The split.
+    #[arg(long, default_value = "test")]
+    pub split: String,
+    /// The trajectory's index in the split.
+    #[arg(long, default_value_t = 0)]
+    pub index: usize,
+    /// The GIF to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Pixels per grid cell.
+    #[arg(long, default_value_t = 8)]
+    pub pixels_per_cell: u32,
+    /// Draw every this many frames.
+    #[arg(long, default_value_t = 2)]
+    pub frame_every: usize,
+}
+
+/// Runs a `phi dataset` command.
+///
+/// # Errors
+/// Whatever the command reports.
+pub fn run(command: DatasetCommand) -> Result<()> {
+    match command {
+        DatasetCommand::Generate(args) => run_generate(args),
+        DatasetCommand::Merge { out, shards } => {
+            let summary = merge(&out, &shards)?;
+            println!(
+                "merged {} shard(s) into {}: {}",
+                shards.len(),
+                out.display(),
+                summary
+                    .counts
+                    .iter()
+                    .map(|(s, n)| format!("{s} {n}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+            Ok(())
+        }
+        DatasetCommand::Stats {
+            dir,
+            split,
+            radius,
+            limit,
+            out,
+            print_every,
+        } => {
+            let report = dataset_stats(&StatsOptions {
+                dir: dir.clone(),
+                split,
+                radius,
+                limit,
+                out: out.clone(),
+            })?;
+            print!("{}", format_report(&report, &dir, radius, print_every));
+            if let Some(out) = out {
+                println!(
+                    "wrote {}: x = frame (ticks every 50), y = neighbours (ticks every 10), blue \
+                     shade = share of liquid particles, red = mean, green = quartiles, orange = \
+                     5th and 95th percentiles",
+                    out.display()
+                );
+            }
+            Ok(())
+        }
+        DatasetCommand::Export { dir, format, out } => {
+            let dataset = phi_gns::data::Dataset::open(&dir)?;
+            match format {
+                ExportFormat::Npz => {
+                    std::fs::create_dir_all(&out)
+                        .with_context(|| format!("cannot create {}", out.display()))?;
+                    for split in dataset.metadata().splits.keys() {
+                        let file = out.join(format!("{split}.npz"));
+                        let count = phi_gns::data::export_npz(&dataset, split, &file)?;
+                        println!("{split}: {count} trajectories -> {}", file.display());
+                    }
+                }
+                ExportFormat::Tfrecord => {
+                    phi_gns::data::tfrecord::export_tfrecord(&dataset, &out)?;
+                    println!(
+                        "wrote {}/{{split}}.tfrecord and metadata.json",
+                        out.display()
+                    );
+                }
+            }
+            Ok(())
+        }
+        DatasetCommand::Import { input, out } => {
+            let dataset = phi_gns::data::tfrecord::import_tfrecord(&input, &out)?;
+            let counts: Vec<String> = dataset
+                .metadata()
+                .splits
+                .iter()
+                .map(|(s, n)| format!("{s} {n}"))
+                .collect();
+            println!(
+                "imported {} into {}: {}",
+                input.display(),
+                out.display(),
+                counts.join(", ")
+            );
+            Ok(())
+        }
+    }
+}
+
+fn run_generate(args: GenerateArgs) -> Result<()> {
+    let splits = match args.split.as_str() {
+        "all" => Split::ALL.to_vec(),
+        s => vec![
+            s.parse::<Split>()
+                .map_err(anyhow::Error::msg)
+                .context("--split")?,
+        ],
+    };
+    let mut params = match &args.config {
+        Some(path) => RandomSceneParams::from_file(path)?,
+        None => RandomSceneParams::default(),
+    };
+    if let Some(steps) = args.steps {
+        params.steps = steps;
+        params.validate("--steps")?;
+    }
+    let options = GenerateOptions {
+        out: args.out,
+        splits,
+        count: args.count,
+        seed: args.seed,
+        variant: args.variant,
+        params,
+        threads: args.threads,
+        shard: args.shard,
+        resume: args.resume,
+        progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
+    };
+    let summary = generate(&options)?;
+    println!(
+        "{}: wrote {} trajectories ({}..{} particles), kept {} finished, in {:.1} s{}",
+        options.out.display(),
+        summary.written,
+        summary.particles.0,
+        summary.particles.1,
+        summary.skipped,
+        summary.seconds,
+        if options.shard.count > 1 {
+            format!(
+                " (shard {}; run `phi dataset merge` when all shards are done)",
+                options.shard
+            )
+        } else {
+            String::new()
+        }
+    );
+    Ok(())
+}
+
+/// Runs `phi render`.
+///
+/// # Errors
+/// A missing dataset or trajectory, I/O errors.
+pub fn render(args: RenderArgs) -> Result<()> {
+    let pictures = render_trajectory(
+        &args.dataset,
+        &args.split,
+        args.index,
+        &args.out,
+        args.pixels_per_cell,
+        args.frame_every,
+    )?;
+    println!("wrote {} ({pictures} pictures)", args.out.display());
+    Ok(())
+}

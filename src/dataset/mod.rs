@@ -1,0 +1,234 @@
+//! `phi dataset ...` and `phi render`: the FLIP dataset of thesis section 5.2 (table 5.1).
+//!
+//! - [`generate`]: draws and simulates trajectories (train and valid: random scenes from
+//!   [`RandomSceneParams`]; test: the ten hand-made scenes of `scenes/test/`), in parallel over
+//!   trajectories, resumable and shardable;
+//! - [`merge`]: joins shard directories into one dataset;
+//! - [`stats`]: particle counts and the neighbour-count distribution over time (thesis fig. 5.4);
+//! - [`render`]: a GIF of one trajectory.
+//!
+//! The files are those of [`phi_gns::data`]: `DIR/metadata.json` and
+//! `DIR/{train,valid,test}/traj_NNNNN.npz`. `docs/datasets.md` describes the format and the
+//! commands.
+
+pub mod cli;
+pub mod generate;
+pub mod merge;
+pub mod render;
+pub mod stats;
+
+use std::path::Path;
+
+use anyhow::{Context, Result, bail};
+use phi_core::backend::ndarray::NdArray;
+use phi_flip::{
+    ParticleTrajectory, RandomSceneParams, Scene, SceneVariant, cell_centres,
+    generate_random_scene, record_trajectory,
+};
+use phi_geom::{Geometry, Obstacle};
+use serde::{Deserialize, Serialize};
+
+/// A split of the dataset.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Split {
+    /// Random scenes for training (thesis: 2000).
+    Train,
+    /// Random scenes from another seed (thesis: 20).
+    Valid,
+    /// The hand-made scenes of `scenes/test/` (thesis: 10).
+    Test,
+}
+
+impl Split {
+    /// Every split, in the order they are generated.
+    pub const ALL: [Split; 3] = [Split::Train, Split::Valid, Split::Test];
+
+    /// The directory name: `train`, `valid` or `test`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Split::Train => "train",
+            Split::Valid => "valid",
+            Split::Test => "test",
+        }
+    }
+
+    /// The thesis' number of trajectories.
+    pub fn default_count(self) -> usize {
+        match self {
+            Split::Train => 2000,
+            Split::Valid => 20,
+            Split::Test => TEST_SCENES.len(),
+        }
+    }
+
+    /// The seed of the split's stream of trajectory seeds, from the dataset seed.
+    pub fn seed(self, dataset_seed: u64) -> u64 {
+        let salt = match self {
+            Split::Train => 0x7472_6169_6e00_0000, // "train"
+            Split::Valid => 0x7661_6c69_6400_0000, // "valid"
+            Split::Test => 0x7465_7374_0000_0000,  // "test"
+        };
+        splitmix64(dataset_seed ^ salt)
+    }
+}
+
+impl std::fmt::Display for Split {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Split {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        Split::ALL
+            .into_iter()
+            .find(|split| split.name() == s)
+            .ok_or_else(|| format!("unknown split {s:?}; use train, valid or test"))
+    }
+}
+
+/// SplitMix64's output function: a bijective mix of 64 bits, so distinct inputs give distinct,
+/// well-spread seeds.
+pub fn splitmix64(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// The seed of trajectory `index` of a split: a function of the split seed and the index only,
+/// so the bytes written do not depend on threads, shards or what was generated before.
+pub fn trajectory_seed(split_seed: u64, index: usize) -> u64 {
+    splitmix64(split_seed ^ splitmix64(index as u64))
+}
+
+/// `(file name, text)` of `scenes/test/<name>.toml`, compiled in.
+macro_rules! test_scene_file {
+    ($name:literal) => {
+        (
+            concat!($name, ".toml"),
+            include_str!(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/scenes/test/",
+                $name,
+                ".toml"
+            )),
+        )
+    };
+}
+
+/// The test scenes, compiled into the binary: (file name, TOML text).
+pub const TEST_SCENES: [(&str, &str); 10] = [
+    test_scene_file!("01_tall_drop"),
+    test_scene_file!("02_narrow_gap"),
+    test_scene_file!("03_stacked_obstacles"),
+    test_scene_file!("04_pool_splash"),
+    test_scene_file!("05_funnel"),
+    test_scene_file!("06_side_jet"),
+    test_scene_file!("07_colliding_blocks"),
+    test_scene_file!("08_cup"),
+    test_scene_file!("09_steep_ramp"),
+    test_scene_file!("10_sheet_on_diamond"),
+];
+
+/// One simulated trajectory before scaling: positions in cells, liquid first.
+#[derive(Debug, Clone)]
+pub struct RawTrajectory {
+    /// The positions.
+    pub trajectory: ParticleTrajectory,
+    /// The seed it was made from (random scenes: the drawing seed; test scenes: the scene's).
+    pub seed: u64,
+}
+
+/// Simulates trajectory `index` of `split`: a random scene drawn from `seed` (train, valid) or
+/// test scene `index`; `steps` overrides the step count of test scenes. Runs on the calling
+/// thread (ndarray backend; the 32×32 kernels stay below its parallel threshold).
+///
+/// # Errors
+/// A scene that cannot be drawn or built, a failing simulation step.
+pub fn simulate_trajectory(
+    split: Split,
+    index: usize,
+    seed: u64,
+    params: &RandomSceneParams,
+    variant: SceneVariant,
+    steps: usize,
+) -> Result<RawTrajectory> {
+    match split {
+        Split::Train | Split::Valid => {
+            let scene = generate_random_scene(params, variant, seed)?;
+            let (simulation, particles) = scene.simulation(params.dt)?;
+            let trajectory =
+                record_trajectory(&simulation, particles, &scene.obstacle_particles, steps)?;
+            Ok(RawTrajectory { trajectory, seed })
+        }
+        Split::Test => {
+            let (name, _) = TEST_SCENES
+                .get(index)
+                .with_context(|| format!("there are {} test scenes", TEST_SCENES.len()))?;
+            let scene = test_scene(index, variant)?;
+            let origin = format!("scenes/test/{name}");
+            let setup = scene.build::<NdArray>(&origin, &Default::default())?;
+            let ny = scene.domain.resolution[1];
+            let obstacle_particles = cell_centres(&setup.simulation.solid_cells(0.0)?, ny);
+            let trajectory = record_trajectory(
+                &setup.simulation,
+                setup.particles,
+                &obstacle_particles,
+                steps,
+            )?;
+            Ok(RawTrajectory {
+                trajectory,
+                seed: scene.simulation.seed,
+            })
+        }
+    }
+}
+
+/// Test scene `index`, checked for the dataset (2D, no inflows), with the wall ring added in the
+/// `walls` variant.
+///
+/// # Errors
+/// An invalid scene file.
+pub fn test_scene(index: usize, variant: SceneVariant) -> Result<Scene> {
+    let (name, text) = TEST_SCENES[index];
+    let origin = format!("scenes/test/{name}");
+    let mut scene = Scene::from_toml(text, &origin)?;
+    if scene.dim() != 2 || !scene.inflows.is_empty() {
+        bail!("{origin}: a dataset scene is 2-dimensional and has no inflows");
+    }
+    if variant == SceneVariant::Walls {
+        let [nx, ny] = [scene.domain.resolution[0], scene.domain.resolution[1]].map(|n| n as f32);
+        for (lower, upper) in [
+            ([0.0, 0.0], [1.0, ny]),
+            ([nx - 1.0, 0.0], [nx, ny]),
+            ([1.0, 0.0], [nx - 1.0, 1.0]),
+            ([1.0, ny - 1.0], [nx - 1.0, ny]),
+        ] {
+            scene
+                .obstacles
+                .push(Obstacle::at_rest(Geometry::boxed(lower, upper)?)?);
+        }
+    }
+    Ok(scene)
+}
+
+/// The position scale and offset of the stored positions: the grid of unit cells maps onto
+/// `[0.1, 0.9]` along its longest axis, as in the thesis (`x / 40 + 0.1` at 32 cells).
+pub fn position_scale(resolution: [usize; 2]) -> (f32, f32) {
+    (0.8 / resolution[0].max(resolution[1]) as f32, 0.1)
+}
+
+/// Checks that `path` is a directory or does not exist.
+///
+/// # Errors
+/// When it is a file.
+pub fn check_dir(path: &Path) -> Result<()> {
+    if path.exists() && !path.is_dir() {
+        bail!("{} exists and is not a directory", path.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,382 @@
+//! `phi dataset stats`: particle counts and the distribution of neighbour counts over time
+//! (thesis fig. 5.4), printed and drawn as a PNG.
+//!
+//! Neighbours of a liquid particle are the other particles (liquid or obstacle) within the
+//! connectivity radius in stored units (the GNS graph's edges, without the self-edge). They are
+//! found with a cell list of cell size `radius`: each particle looks at the 3×3 cells around
+//! its own, `O(n)` per frame.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use phi_gns::data::{Dataset, LIQUID, Trajectory};
+use rayon::prelude::*;
+
+use crate::output::{RgbImage, write_png};
+
+/// Neighbour counts from this value up share the last bin of the histograms.
+pub const MAX_NEIGHBOURS: usize = 127;
+
+/// What to measure.
+#[derive(Debug, Clone)]
+pub struct StatsOptions {
+    /// The dataset directory.
+    pub dir: PathBuf,
+    /// The split (`None`: `train` if the dataset has it, else the first listed).
+    pub split: Option<String>,
+    /// Connectivity radius in stored units (thesis: 0.03).
+    pub radius: f32,
+    /// Use the first this many trajectories (thesis fig. 5.4: 50).
+    pub limit: usize,
+    /// Where to draw the plot, if anywhere.
+    pub out: Option<PathBuf>,
+}
+
+/// Smallest, mean and largest of a count over trajectories.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Range {
+    /// Smallest.
+    pub min: usize,
+    /// Mean.
+    pub mean: f64,
+    /// Largest.
+    pub max: usize,
+}
+
+impl Range {
+    fn of(values: &[usize]) -> Self {
+        Range {
+            min: values.iter().copied().min().unwrap_or(0),
+            mean: values.iter().sum::<usize>() as f64 / values.len().max(1) as f64,
+            max: values.iter().copied().max().unwrap_or(0),
+        }
+    }
+}
+
+/// The neighbour counts of one frame over all liquid particles of all trajectories.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct FrameNeighbours {
+    /// Mean.
+    pub mean: f64,
+    /// 5th, 25th, 50th, 75th and 95th percentiles.
+    pub percentiles: [usize; 5],
+    /// Largest.
+    pub max: usize,
+}
+
+/// What `phi dataset stats` found.
+#[derive(Debug, Clone)]
+pub struct StatsReport {
+    /// The split measured.
+    pub split: String,
+    /// Trajectories measured, and in the split.
+    pub trajectories: (usize, usize),
+    /// Frames per trajectory.
+    pub frames: usize,
+    /// Liquid particles per trajectory.
+    pub liquid: Range,
+    /// Obstacle particles per trajectory.
+    pub obstacle: Range,
+    /// All particles per trajectory.
+    pub total: Range,
+    /// Per frame: the neighbour distribution.
+    pub neighbours: Vec<FrameNeighbours>,
+    /// Per frame: how many liquid particles have `k` neighbours (`k` up to [`MAX_NEIGHBOURS`],
+    /// the last bin holding that many or more).
+    pub histogram: Vec<Vec<u64>>,
+}
+
+/// Measures `options.split` of the dataset (see the module docs) and draws the plot.
+///
+/// # Errors
+/// A missing dataset or split, unreadable files, a non-positive radius.
+pub fn dataset_stats(options: &StatsOptions) -> Result<StatsReport> {
+    if !(options.radius.is_finite() && options.radius > 0.0) {
+        bail!("--radius must be positive, got {}", options.radius);
+    }
+    let dataset = Dataset::open(&options.dir)?;
+    let metadata = dataset.metadata();
+    let split = match &options.split {
+        Some(s) => s.clone(),
+        None if metadata.splits.contains_key("train") => "train".into(),
+        None => metadata
+            .splits
+            .keys()
+            .next()
+            .cloned()
+            .with_context(|| format!("{} lists no split", options.dir.display()))?,
+    };
+    let available = dataset.split_len(&split)?;
+    let count = available.min(options.limit.max(1));
+    let frames = metadata.frames();
+    let bounds: Vec<[f32; 2]> = metadata
+        .bounds
+        .iter()
+        .map(|&[lo, hi]| [lo as f32, hi as f32])
+        .collect();
+    let per_trajectory: Vec<(usize, usize, Vec<Vec<u64>>)> = (0..count)
+        .into_par_iter()
+        .map(|index| -> Result<_> {
+            let (trajectory, _) = dataset.read_with_stats(&split, index)?;
+            let liquid = trajectory.liquid_particles();
+            let histogram = neighbour_histogram(&trajectory, &bounds, options.radius);
+            Ok((liquid, trajectory.particles - liquid, histogram))
+        })
+        .collect::<Result<_>>()?;
+
+    let liquid: Vec<usize> = per_trajectory.iter().map(|t| t.0).collect();
+    let obstacle: Vec<usize> = per_trajectory.iter().map(|t| t.1).collect();
+    let total: Vec<usize> = liquid.iter().zip(&obstacle).map(|(l, o)| l + o).collect();
+    let mut histogram = vec![vec![0u64; MAX_NEIGHBOURS + 1]; frames];
+    for (_, _, h) in &per_trajectory {
+        for (sum, frame) in histogram.iter_mut().zip(h) {
+            for (s, c) in sum.iter_mut().zip(frame) {
+                *s += c;
+            }
+        }
+    }
+    let neighbours = histogram.iter().map(|h| summarise(h)).collect();
+    let report = StatsReport {
+        split,
+        trajectories: (count, available),
+        frames,
+        liquid: Range::of(&liquid),
+        obstacle: Range::of(&obstacle),
+        total: Range::of(&total),
+        neighbours,
+        histogram,
+    };
+    if let Some(out) = &options.out {
+        write_png(out, &plot(&report))?;
+    }
+    Ok(report)
+}
+
+/// Per frame of `trajectory`, how many liquid particles have `k` neighbours within `radius`.
+pub fn neighbour_histogram(
+    trajectory: &Trajectory,
+    bounds: &[[f32; 2]],
+    radius: f32,
+) -> Vec<Vec<u64>> {
+    let n = trajectory.particles;
+    let d = trajectory.dim;
+    let liquid: Vec<bool> = trajectory
+        .particle_type
+        .iter()
+        .map(|&t| t == LIQUID)
+        .collect();
+    // One cell of margin around the bounds catches particles that left them slightly.
+    let cells: Vec<usize> = bounds
+        .iter()
+        .map(|[lo, hi]| (((hi - lo) / radius).ceil() as usize).max(1) + 2)
+        .collect();
+    let cell_of = |p: &[f32]| -> Vec<usize> {
+        (0..d)
+            .map(|a| {
+                let c = ((p[a] - bounds[a][0]) / radius).floor() + 1.0;
+                (c.max(0.0) as usize).min(cells[a] - 1)
+            })
+            .collect()
+    };
+    let flat = |c: &[usize]| c.iter().zip(&cells).fold(0, |acc, (&c, &n)| acc * n + c);
+    let cell_count: usize = cells.iter().product();
+    let r2 = radius * radius;
+    let mut start = vec![0usize; cell_count + 1];
+    let mut order = vec![0usize; n];
+    let mut cell_index = vec![0usize; n];
+    let mut out = Vec::with_capacity(trajectory.frames);
+    for t in 0..trajectory.frames {
+        let frame = trajectory.frame(t);
+        // Counting sort of the particles by cell.
+        start.iter_mut().for_each(|s| *s = 0);
+        for i in 0..n {
+            cell_index[i] = flat(&cell_of(&frame[i * d..(i + 1) * d]));
+            start[cell_index[i] + 1] += 1;
+        }
+        for c in 0..cell_count {
+            start[c + 1] += start[c];
+        }
+        let mut fill = start.clone();
+        for i in 0..n {
+            order[fill[cell_index[i]]] = i;
+            fill[cell_index[i]] += 1;
+        }
+        let mut histogram = vec![0u64; MAX_NEIGHBOURS + 1];
+        for i in (0..n).filter(|&i| liquid[i]) {
+            let p = &frame[i * d..(i + 1) * d];
+            let home = cell_of(p);
+            let mut found = 0usize;
+            for offset in 0..3usize.pow(d as u32) {
+                let mut c = home.clone();
+                let mut rest = offset;
+                let mut inside = true;
+                for (a, ca) in c.iter_mut().enumerate() {
+                    let step = rest % 3;
+                    rest /= 3;
+                    match (*ca + step).checked_sub(1) {
+                        Some(v) if v < cells[a] => *ca = v,
+                        _ => inside = false,
+                    }
+                }
+                if !inside {
+                    continue;
+                }
+                let k = flat(&c);
+                for &j in &order[start[k]..start[k + 1]] {
+                    if j == i {
+                        continue;
+                    }
+                    let q = &frame[j * d..(j + 1) * d];
+                    let dist2: f32 = p.iter().zip(q).map(|(a, b)| (a - b) * (a - b)).sum();
+                    found += usize::from(dist2 <= r2);
+                }
+            }
+            histogram[found.min(MAX_NEIGHBOURS)] += 1;
+        }
+        out.push(histogram);
+    }
+    out
+}
+
+/// Mean, percentiles and maximum of a histogram of counts.
+fn summarise(histogram: &[u64]) -> FrameNeighbours {
+    let total: u64 = histogram.iter().sum();
+    if total == 0 {
+        return FrameNeighbours::default();
+    }
+    let mean = histogram
+        .iter()
+        .enumerate()
+        .map(|(k, &c)| k as f64 * c as f64)
+        .sum::<f64>()
+        / total as f64;
+    let percentile = |q: f64| {
+        let rank = (q * total as f64).ceil().max(1.0) as u64;
+        let mut seen = 0;
+        for (k, &c) in histogram.iter().enumerate() {
+            seen += c;
+            if seen >= rank {
+                return k;
+            }
+        }
+        histogram.len() - 1
+    };
+    FrameNeighbours {
+        mean,
+        percentiles: [0.05, 0.25, 0.5, 0.75, 0.95].map(percentile),
+        max: histogram.iter().rposition(|&c| c > 0).unwrap_or(0),
+    }
+}
+
+/// Pixels per neighbour on the vertical axis and per frame on the horizontal one.
+const PLOT_Y_SCALE: u32 = 4;
+const PLOT_MARGIN: u32 = 12;
+
+/// The plot of thesis fig. 5.4: x = frame (one pixel column per frame, ticks every 50 frames),
+/// y = neighbours (4 pixels per neighbour, ticks every 10), grey level = share of the frame's
+/// liquid particles with that many neighbours (darker: more); orange: 5th–95th percentile band
+/// edges, green: quartiles, red: mean.
+pub fn plot(report: &StatsReport) -> RgbImage {
+    let frames = report.frames.max(1) as u32;
+    let top = report
+        .neighbours
+        .iter()
+        .map(|f| f.max)
+        .max()
+        .unwrap_or(0)
+        .max(10)
+        .div_ceil(10) as u32
+        * 10;
+    let (w, h) = (
+        frames + 2 * PLOT_MARGIN,
+        top * PLOT_Y_SCALE + 2 * PLOT_MARGIN,
+    );
+    let mut image = RgbImage::new(w, h, [255, 255, 255]);
+    let x_of = |t: u32| PLOT_MARGIN + t;
+    let y_of = |k: f64| (h - PLOT_MARGIN) as f64 - 1.0 - k * PLOT_Y_SCALE as f64;
+    for (t, histogram) in report.histogram.iter().enumerate() {
+        let total: u64 = histogram.iter().sum();
+        let peak = histogram.iter().copied().max().unwrap_or(0).max(1);
+        if total == 0 {
+            continue;
+        }
+        for (k, &c) in histogram.iter().enumerate().filter(|(_, c)| **c > 0) {
+            let shade = 230 - (200 * c / peak) as u8;
+            for dy in 0..PLOT_Y_SCALE {
+                let y = y_of(k as f64) as u32 - dy;
+                image.set_pixel(x_of(t as u32), y, [shade, shade, shade + 25]);
+            }
+        }
+    }
+    let mut dot = |t: usize, k: f64, color: [u8; 3]| {
+        let y = y_of(k).round() as u32;
+        image.set_pixel(x_of(t as u32), y, color);
+        image.set_pixel(x_of(t as u32), y.saturating_sub(1), color);
+    };
+    for (t, f) in report.neighbours.iter().enumerate() {
+        let [p5, p25, _, p75, p95] = f.percentiles;
+        dot(t, p5 as f64, [240, 150, 0]);
+        dot(t, p95 as f64, [240, 150, 0]);
+        dot(t, p25 as f64, [0, 160, 0]);
+        dot(t, p75 as f64, [0, 160, 0]);
+        dot(t, f.mean, [220, 0, 0]);
+    }
+    // Axes and ticks.
+    let black = [0, 0, 0];
+    let (x0, y0) = (PLOT_MARGIN - 1, h - PLOT_MARGIN);
+    for x in x0..w - PLOT_MARGIN / 2 {
+        image.set_pixel(x, y0, black);
+    }
+    for y in PLOT_MARGIN / 2..=y0 {
+        image.set_pixel(x0, y, black);
+    }
+    for t in (0..frames).step_by(50) {
+        for dy in 1..5 {
+            image.set_pixel(x_of(t), y0 + dy, black);
+        }
+    }
+    for k in (0..=top).step_by(10) {
+        let y = y_of(k as f64) as u32;
+        for dx in 1..5 {
+            image.set_pixel(x0 - dx, y, black);
+        }
+    }
+    image
+}
+
+/// The printed form of a report: counts, then the neighbour distribution every `every` frames.
+pub fn format_report(report: &StatsReport, dir: &Path, radius: f32, every: usize) -> String {
+    let mut s = format!(
+        "{}: split {}, {} of {} trajectories, {} frames\n",
+        dir.display(),
+        report.split,
+        report.trajectories.0,
+        report.trajectories.1,
+        report.frames
+    );
+    for (name, r) in [
+        ("liquid", report.liquid),
+        ("obstacle", report.obstacle),
+        ("all", report.total),
+    ] {
+        s += &format!(
+            "  {name:<9} particles: min {:>5}  mean {:>8.1}  max {:>5}\n",
+            r.min, r.mean, r.max
+        );
+    }
+    s += &format!(
+        "neighbours per liquid particle within {radius} (other particles of any type):\n\
+         {:>7} {:>7} {:>4} {:>4} {:>4} {:>4} {:>4} {:>4}\n",
+        "frame", "mean", "p5", "p25", "p50", "p75", "p95", "max"
+    );
+    for (t, f) in report.neighbours.iter().enumerate() {
+        if t % every.max(1) == 0 || t + 1 == report.neighbours.len() {
+            let [p5, p25, p50, p75, p95] = f.percentiles;
+            s += &format!(
+                "{t:>7} {:>7.2} {p5:>4} {p25:>4} {p50:>4} {p75:>4} {p95:>4} {:>4}\n",
+                f.mean, f.max
+            );
+        }
+    }
+    s
+}

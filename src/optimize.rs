@@ -1,0 +1,413 @@
+//! `phi optimize`: the thesis' optimisation experiment (section 4.3) — initial particle positions
+//! optimised by gradient descent through the differentiable FLIP simulation so that the simulated
+//! liquid matches a target.
+//!
+//! Output directory:
+//! - `loss.csv`: `iteration,loss,gradient_norm,rms_distance,chamfer` per iteration (iteration
+//!   `k` is the loss of the initial positions after `k` gradient steps);
+//! - `loss.png`: the loss curve;
+//! - `frames/iteration_KKK_initial.png`, `frames/iteration_KKK_final.png`: the initial positions
+//!   and the simulated positions of the first, every `frame_every`-th and the last iteration,
+//!   the target drawn in orange under the liquid (blue) — initial frames show the target's
+//!   initial positions, final frames the target;
+//! - `summary.json`: the configuration, the loss and the distances before and after.
+//!
+//! A run that stops early (non-finite loss or gradient, divergence, a failed step) writes all of
+//! the above for the iterations it completed, then returns the error.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use phi_core::AutodiffBackend;
+use phi_flip::loss::set_distances;
+use phi_flip::optimize::{IterationRecord, LossSpec};
+use phi_flip::{OptimizeConfig, OptimizeProblem};
+use serde::Serialize;
+
+use crate::output::{
+    FrameStyle, KIND_LIQUID, OutputError, RgbImage, render_frame, write_atomic, write_png,
+};
+
+/// `phi optimize CONFIG.toml --out DIR [--backend burn|tch] [--iterations N] [--loss L]`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct OptimizeArgs {
+    /// The optimisation (TOML; see scenes/optimize/ for examples).
+    pub config: PathBuf,
+    /// The output directory.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// The backend: one with autodiff (default: the first compiled in).
+    #[arg(long)]
+    pub backend: Option<crate::backends::BackendKind>,
+    /// Run this many iterations instead of the file's.
+    #[arg(long)]
+    pub iterations: Option<usize>,
+    /// Use this loss instead of the file's: l2, sinkhorn or density.
+    #[arg(long, value_parser = parse_loss)]
+    pub loss: Option<LossSpec>,
+    /// Frames of every this many iterations (plus the first and the last).
+    #[arg(long, default_value_t = 5)]
+    pub frame_every: usize,
+    /// Pixels per grid cell in the frames.
+    #[arg(long, default_value_t = 8)]
+    pub pixels_per_cell: u32,
+}
+
+fn parse_loss(name: &str) -> Result<LossSpec, String> {
+    match name {
+        "l2" => Ok(LossSpec::L2),
+        "sinkhorn" => Ok(LossSpec::Sinkhorn),
+        "density" => Ok(LossSpec::Density),
+        other => Err(format!(
+            "unknown loss {other:?}; use l2, sinkhorn or density"
+        )),
+    }
+}
+
+/// Runs `phi optimize` and prints a summary.
+///
+/// # Errors
+/// An unusable backend, configuration or output error, or an early stop.
+pub fn run(args: OptimizeArgs) -> Result<()> {
+    use crate::backends::BackendKind;
+    let config = OptimizeConfig::from_file(&args.config)?;
+    let kind = match args.backend {
+        Some(kind) => kind,
+        None => *BackendKind::available()
+            .iter()
+            .find(|k| k.has_autodiff())
+            .context("no backend with autodiff is compiled into this build")?,
+    };
+    crate::simulate::check_out_dir(&args.out)?;
+    let options = OptimizeOptions {
+        config: args.config.clone(),
+        out: args.out.clone(),
+        iterations: args.iterations,
+        loss: args.loss,
+        frame_every: args.frame_every,
+        pixels_per_cell: args.pixels_per_cell,
+    };
+    println!(
+        "{}: {}",
+        args.config.display(),
+        config.description.as_deref().unwrap_or("(no description)")
+    );
+    let summary: Result<OptimizeSummary> = crate::with_autodiff_backend!(
+        kind,
+        B => optimize::<B>(&config, &options),
+        otherwise => {
+            let _ = &options;
+            Err(anyhow::anyhow!(
+                "the {kind} backend has no autodiff; use --backend burn or tch"
+            ))
+        }
+    );
+    let summary = summary?;
+    println!(
+        "{} iterations of {} particles on {} ({} loss, {:.2} s per iteration): loss {} -> {} \
+         (within 1% of the lowest from iteration {}); Chamfer distance to the target {:.3} -> \
+         {:.3}, earth mover's {:.3} -> {:.3} cells; outputs in {}",
+        summary.iterations,
+        summary.particles,
+        summary.backend,
+        summary.loss,
+        summary.seconds_per_iteration,
+        summary.losses.first().copied().unwrap_or(f32::NAN),
+        summary.losses.last().copied().unwrap_or(f32::NAN),
+        summary.converged_at,
+        summary.chamfer[0],
+        summary.chamfer[1],
+        summary.wasserstein[0],
+        summary.wasserstein[1],
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// The particle kind the target is drawn with (orange in [`FrameStyle::default`]).
+const KIND_TARGET: u8 = 2;
+
+/// How to run and what to write.
+#[derive(Debug, Clone)]
+pub struct OptimizeOptions {
+    /// The configuration file (for messages).
+    pub config: PathBuf,
+    /// The output directory.
+    pub out: PathBuf,
+    /// Override of `[optimize] iterations`.
+    pub iterations: Option<usize>,
+    /// Override of `[optimize] loss`.
+    pub loss: Option<LossSpec>,
+    /// Frames of every this many iterations (plus the first and the last).
+    pub frame_every: usize,
+    /// Pixels per grid cell in the frames.
+    pub pixels_per_cell: u32,
+}
+
+/// What a run did.
+#[derive(Debug, Clone, Serialize)]
+pub struct OptimizeSummary {
+    /// The backend.
+    pub backend: String,
+    /// The loss (`l2`, `sinkhorn`, `density`).
+    pub loss: String,
+    /// Particles optimised.
+    pub particles: usize,
+    /// Iterations completed (loss evaluations).
+    pub iterations: usize,
+    /// The loss per iteration.
+    pub losses: Vec<f32>,
+    /// The first iteration whose loss is within 1% of the lowest (the convergence point).
+    pub converged_at: usize,
+    /// Chamfer distance of the simulated liquid to the target, first and last iteration.
+    pub chamfer: [f32; 2],
+    /// Earth mover's estimate (`√(2 S_ε)`, ε = 0.01) to the target, first and last iteration.
+    pub wasserstein: [f32; 2],
+    /// RMS distance of particle `i` to target point `i`, first and last iteration.
+    pub rms_distance: [f32; 2],
+    /// Wall-clock seconds per iteration (forward and backward).
+    pub seconds_per_iteration: f64,
+    /// Why the run stopped early, if it did.
+    pub stopped: Option<String>,
+}
+
+/// Runs the optimisation of `config` on backend `B` and writes the outputs.
+///
+/// # Errors
+/// Configuration and output errors; an early stop, after its outputs are written.
+pub fn optimize<B: AutodiffBackend>(
+    config: &OptimizeConfig,
+    options: &OptimizeOptions,
+) -> Result<OptimizeSummary> {
+    let mut config = config.clone();
+    if let Some(n) = options.iterations {
+        config.optimize.iterations = n;
+    }
+    if let Some(loss) = options.loss {
+        config.optimize.loss = loss;
+    }
+    let origin = options.config.display().to_string();
+    let device = B::default_device();
+    let problem: OptimizeProblem<B> = config.build(&origin, &device)?;
+    let out = &options.out;
+    let frames = out.join("frames");
+    std::fs::create_dir_all(&frames).with_context(|| format!("creating {}", frames.display()))?;
+
+    let sim = &problem.simulation;
+    let domain = sim.domain().clone();
+    let d = domain.dim();
+    let solid = sim.solid_cells(0.0)?;
+    let style = FrameStyle {
+        pixels_per_cell: options.pixels_per_cell.max(1),
+        ..FrameStyle::default()
+    };
+    let target = problem.target.to_vec();
+    let target_initial = problem.target_initial.to_vec();
+    let draw = |liquid: &[f32], under: &[f32], path: &Path| -> Result<()> {
+        let mut positions = under.to_vec();
+        positions.extend_from_slice(liquid);
+        let mut kinds = vec![KIND_TARGET; under.len() / d];
+        kinds.extend(std::iter::repeat_n(KIND_LIQUID, liquid.len() / d));
+        let image = render_frame(
+            &positions,
+            d,
+            &kinds,
+            domain.lower(),
+            domain.upper(),
+            domain.resolution(),
+            Some(&solid),
+            &style,
+        )?;
+        write_png(path, &image)?;
+        Ok(())
+    };
+    let iterations = problem.iterations;
+    let frame_every = options.frame_every.max(1);
+    let started = Instant::now();
+    let mut draw_error = None;
+    let outcome = problem.run(|record: &IterationRecord| {
+        eprintln!(
+            "iteration {:>3}: loss {:>12.4}  |∇| {:>10.4}  chamfer {:.3}",
+            record.iteration, record.loss, record.gradient_norm, record.chamfer
+        );
+        let k = record.iteration;
+        if k == 0 || k == iterations || k.is_multiple_of(frame_every) {
+            let name = |what: &str| frames.join(format!("iteration_{k:03}_{what}.png"));
+            let result = draw(&record.initial_positions, &target_initial, &name("initial"))
+                .and_then(|()| draw(&record.final_positions, &target, &name("final")));
+            if let Err(e) = result {
+                draw_error.get_or_insert(e);
+            }
+        }
+    });
+    let elapsed = started.elapsed().as_secs_f64();
+    if let Some(e) = draw_error {
+        return Err(e);
+    }
+    let records = &outcome.records;
+    // Always a frame of the last good state (an early stop may fall between frame iterations).
+    if let Some(last) = records.last() {
+        let k = last.iteration;
+        draw(
+            &last.initial_positions,
+            &target_initial,
+            &frames.join(format!("iteration_{k:03}_initial.png")),
+        )?;
+        draw(
+            &last.final_positions,
+            &target,
+            &frames.join(format!("iteration_{k:03}_final.png")),
+        )?;
+    }
+    write_loss_csv(&out.join("loss.csv"), records)?;
+    let losses: Vec<f32> = records.iter().map(|r| r.loss).collect();
+    write_png(out.join("loss.png"), &plot_losses(&losses))?;
+
+    let (first, last) = match (records.first(), records.last()) {
+        (Some(f), Some(l)) => (f, l),
+        _ => bail!(
+            "{origin}: the optimisation stopped before its first iteration: {}",
+            outcome
+                .stopped
+                .as_ref()
+                .map_or("unknown reason".into(), ToString::to_string)
+        ),
+    };
+    let distances = |r: &IterationRecord| set_distances(&r.final_positions, &target, d);
+    let (before, after) = (distances(first)?, distances(last)?);
+    let lowest = losses.iter().copied().fold(f32::INFINITY, f32::min);
+    let converged_at = losses
+        .iter()
+        .position(|&l| l <= lowest + 0.01 * lowest.abs())
+        .unwrap_or(0);
+    let summary = OptimizeSummary {
+        backend: B::name().to_string(),
+        loss: problem.loss.name().into(),
+        particles: problem.initial.len(),
+        iterations: records.len(),
+        losses,
+        converged_at,
+        chamfer: [before.chamfer, after.chamfer],
+        wasserstein: [before.wasserstein, after.wasserstein],
+        rms_distance: [first.rms_distance, last.rms_distance],
+        seconds_per_iteration: elapsed / records.len().max(1) as f64,
+        stopped: outcome.stopped.as_ref().map(ToString::to_string),
+    };
+    let json = serde_json::json!({ "config": config, "summary": summary });
+    write_atomic(&out.join("summary.json"), |w| -> Result<(), OutputError> {
+        serde_json::to_writer_pretty(&mut *w, &json)
+            .map_err(|e| OutputError::InvalidInput(e.to_string()))?;
+        Ok(())
+    })?;
+    if let Some(e) = outcome.stopped {
+        bail!(
+            "{origin}: {e}; the outputs of the last good iteration ({}) are in {}",
+            last.iteration,
+            out.display()
+        );
+    }
+    Ok(summary)
+}
+
+fn write_loss_csv(path: &Path, records: &[IterationRecord]) -> Result<()> {
+    write_atomic(path, |w| -> Result<(), OutputError> {
+        let io = |e: std::io::Error| OutputError::InvalidInput(e.to_string());
+        writeln!(w, "iteration,loss,gradient_norm,rms_distance,chamfer").map_err(io)?;
+        for r in records {
+            writeln!(
+                w,
+                "{},{},{},{},{}",
+                r.iteration, r.loss, r.gradient_norm, r.rms_distance, r.chamfer
+            )
+            .map_err(io)?;
+        }
+        Ok(())
+    })?;
+    Ok(())
+}
+
+/// A 640×400 plot of `losses` against the iteration: axes from 0, a grey line per tenth of the
+/// largest loss, the curve in blue with a dot per iteration.
+pub fn plot_losses(losses: &[f32]) -> RgbImage {
+    let (width, height) = (640u32, 400u32);
+    let (left, right, top, bottom) = (40i64, 20i64, 20i64, 30i64);
+    let mut image = RgbImage::new(width, height, [255, 255, 255]);
+    let plot_w = i64::from(width) - left - right;
+    let plot_h = i64::from(height) - top - bottom;
+    let finite: Vec<f32> = losses.iter().copied().filter(|l| l.is_finite()).collect();
+    let max = finite
+        .iter()
+        .copied()
+        .fold(0.0f32, f32::max)
+        .max(f32::MIN_POSITIVE);
+    let x_of = |i: usize| left + (i as i64 * plot_w) / (losses.len().max(2) as i64 - 1);
+    let y_of = |l: f32| top + plot_h - ((l / max).clamp(0.0, 1.0) * plot_h as f32).round() as i64;
+    for tenth in 1..=10 {
+        let y = top + plot_h - plot_h * tenth / 10;
+        line(&mut image, (left, y), (left + plot_w, y), [225, 225, 225]);
+    }
+    for (i, _) in losses.iter().enumerate() {
+        let x = x_of(i);
+        line(
+            &mut image,
+            (x, top + plot_h),
+            (x, top + plot_h + 4),
+            [40, 40, 40],
+        );
+    }
+    line(&mut image, (left, top), (left, top + plot_h), [40, 40, 40]);
+    line(
+        &mut image,
+        (left, top + plot_h),
+        (left + plot_w, top + plot_h),
+        [40, 40, 40],
+    );
+    let points: Vec<(i64, i64)> = losses
+        .iter()
+        .enumerate()
+        .filter(|(_, l)| l.is_finite())
+        .map(|(i, &l)| (x_of(i), y_of(l)))
+        .collect();
+    for pair in points.windows(2) {
+        line(&mut image, pair[0], pair[1], [30, 100, 220]);
+    }
+    for &(x, y) in &points {
+        for dx in -2..=2 {
+            for dy in -2..=2 {
+                set(&mut image, x + dx, y + dy, [30, 100, 220]);
+            }
+        }
+    }
+    image
+}
+
+fn set(image: &mut RgbImage, x: i64, y: i64, color: [u8; 3]) {
+    if let (Ok(x), Ok(y)) = (u32::try_from(x), u32::try_from(y)) {
+        image.set_pixel(x, y, color);
+    }
+}
+
+/// Bresenham's line from `a` to `b`.
+fn line(image: &mut RgbImage, a: (i64, i64), b: (i64, i64), color: [u8; 3]) {
+    let (mut x, mut y) = a;
+    let (dx, dy) = ((b.0 - x).abs(), -(b.1 - y).abs());
+    let (sx, sy) = (if x < b.0 { 1 } else { -1 }, if y < b.1 { 1 } else { -1 });
+    let mut err = dx + dy;
+    loop {
+        set(image, x, y, color);
+        if (x, y) == b {
+            break;
+        }
+        let e2 = 2 * err;
+        if e2 >= dy {
+            err += dy;
+            x += sx;
+        }
+        if e2 <= dx {
+            err += dx;
+            y += sy;
+        }
+    }
+}

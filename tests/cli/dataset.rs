@@ -1,0 +1,340 @@
+//! `phi dataset generate | merge | stats` and `phi render` end to end.
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+use phi::phi_gns::data::{
+    Dataset, LIQUID, OBSTACLE, Trajectory, read_metadata, read_trajectory, read_trajectory_stats,
+};
+
+use super::{phi, scratch};
+
+fn run(args: &[&str], dirs: &[&Path]) -> Output {
+    let mut command = phi();
+    command.args(args);
+    for d in dirs {
+        command.arg(d);
+    }
+    command.output().unwrap()
+}
+
+fn ok(output: Output) -> String {
+    assert!(
+        output.status.success(),
+        "stdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
+fn generate(out: &Path, extra: &[&str]) -> Output {
+    let mut command = phi();
+    command
+        .args(["dataset", "generate", "--out"])
+        .arg(out)
+        .args(["--steps", "5", "--count", "3"])
+        .args(extra);
+    command.output().unwrap()
+}
+
+/// Every trajectory file of a dataset directory: `split/name`, its content and its stored
+/// statistics.
+fn files(dir: &Path) -> Vec<(String, Trajectory, String)> {
+    let mut all = Vec::new();
+    for split in ["train", "valid", "test"] {
+        let Ok(entries) = std::fs::read_dir(dir.join(split)) else {
+            continue;
+        };
+        let mut names: Vec<PathBuf> = entries.map(|e| e.unwrap().path()).collect();
+        names.sort();
+        for path in names {
+            let name = format!("{split}/{}", path.file_name().unwrap().to_string_lossy());
+            let stats = format!("{:?}", read_trajectory_stats(&path).unwrap());
+            all.push((name, read_trajectory(&path).unwrap(), stats));
+        }
+    }
+    all
+}
+
+#[test]
+fn generate_writes_a_dataset_that_opens() {
+    let dir = scratch("dataset-generate");
+    let out = dir.join("data");
+    let stdout = ok(generate(&out, &[]));
+    assert!(stdout.contains("wrote 9 trajectories"), "{stdout}");
+    let dataset = Dataset::open(&out).unwrap();
+    let m = dataset.metadata();
+    assert_eq!(m.sequence_length, 5);
+    assert_eq!(
+        (m.dt, m.dim, m.position_scale, m.position_offset),
+        (0.05, 2, 0.025, 0.1)
+    );
+    assert_eq!(m.bounds, vec![[0.1, 0.9]; 2]);
+    for split in ["train", "valid", "test"] {
+        assert_eq!(m.splits[split], 3);
+    }
+    assert_ne!(m.seeds["train"], m.seeds["valid"]);
+    assert!(m.vel_std.iter().chain(&m.acc_std).all(|s| *s > 0.0));
+    assert_eq!(m.generator["params"]["pool_probability"], 0.3);
+    let mut seeds = Vec::new();
+    for split in ["train", "valid", "test"] {
+        for t in dataset.split(split).unwrap() {
+            let t = t.unwrap();
+            assert_eq!(t.frames, 6);
+            assert!(t.particles <= 1300);
+            assert!(t.position.iter().all(|x| (0.1..=0.9).contains(x)));
+            // Liquid first, then static obstacle particles.
+            let liquid = t.liquid_particles();
+            assert!(t.particle_type[..liquid].iter().all(|&k| k == LIQUID));
+            assert!(t.particle_type[liquid..].iter().all(|&k| k == OBSTACLE));
+            let (first, last) = (t.frame(0), t.frame(5));
+            assert_eq!(&first[liquid * 2..], &last[liquid * 2..]);
+            seeds.push(t.seed);
+        }
+    }
+    seeds.sort();
+    seeds.dedup();
+    assert_eq!(seeds.len(), 9, "every trajectory has its own seed");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn rerunning_skips_finished_files_and_threads_do_not_change_bytes() {
+    let dir = scratch("dataset-resume");
+    let one = dir.join("one");
+    ok(generate(&one, &["--split", "train", "--threads", "1"]));
+    let path = one.join("train/traj_00001.npz");
+    let modified = std::fs::metadata(&path).unwrap().modified().unwrap();
+    // A killed run: one file lost, one left half-written.
+    std::fs::remove_file(one.join("train/traj_00000.npz")).unwrap();
+    std::fs::write(one.join("train/traj_00002.npz"), b"PK\x03\x04 truncated").unwrap();
+    let stdout = ok(generate(&one, &["--split", "train", "--threads", "1"]));
+    assert!(
+        stdout.contains("wrote 2 trajectories") && stdout.contains("kept 1"),
+        "{stdout}"
+    );
+    assert_eq!(
+        std::fs::metadata(&path).unwrap().modified().unwrap(),
+        modified
+    );
+
+    let two = dir.join("two");
+    ok(generate(&two, &["--split", "train", "--threads", "2"]));
+    assert_eq!(files(&one), files(&two));
+    for i in 0..3 {
+        let name = format!("train/traj_0000{i}.npz");
+        assert_eq!(
+            std::fs::read(one.join(&name)).unwrap(),
+            std::fs::read(two.join(&name)).unwrap(),
+            "{name}: the bytes depend on the thread count"
+        );
+    }
+    assert_eq!(
+        std::fs::read(one.join("metadata.json")).unwrap(),
+        std::fs::read(two.join("metadata.json")).unwrap()
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn merged_shards_equal_an_unsharded_run() {
+    let dir = scratch("dataset-shards");
+    let whole = dir.join("whole");
+    ok(generate(&whole, &["--variant", "walls"]));
+    let (a, b) = (dir.join("a"), dir.join("b"));
+    // Indices 0 and 2 of each split.
+    let stdout = ok(generate(&a, &["--variant", "walls", "--shard", "0/2"]));
+    assert!(stdout.contains("wrote 6 trajectories"), "{stdout}");
+    ok(generate(&b, &["--variant", "walls", "--shard", "1/2"]));
+    assert!(
+        !a.join("metadata.json").exists(),
+        "a shard is not a dataset"
+    );
+    let merged = dir.join("merged");
+    // A missing shard is an error naming the trajectory.
+    let output = run(&["dataset", "merge"], &[&merged, &a]);
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains("traj_00001.npz"));
+    let _ = std::fs::remove_dir_all(&merged);
+    ok(run(&["dataset", "merge"], &[&merged, &a, &b]));
+    assert_eq!(files(&whole), files(&merged));
+    let (mw, mm) = (
+        read_metadata(&whole).unwrap(),
+        read_metadata(&merged).unwrap(),
+    );
+    assert_eq!(mw, mm);
+    assert_eq!(format!("{:?}", mm.variant), "WallsAsParticles");
+    // Walls as particles: the ring of 124 obstacle particles is in every trajectory.
+    let t = read_trajectory(&merged.join("train/traj_00000.npz")).unwrap();
+    assert!(t.particles - t.liquid_particles() >= 124);
+    // Shards of another configuration do not merge.
+    let c = dir.join("c");
+    ok(generate(&c, &["--shard", "1/2"]));
+    let output = run(&["dataset", "merge"], &[&dir.join("m2"), &a, &c]);
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains("variant"));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_directory_of_another_dataset_is_refused() {
+    let dir = scratch("dataset-foreign");
+    let out = dir.join("data");
+    ok(generate(&out, &["--split", "valid"]));
+    let output = generate(&out, &["--split", "valid", "--seed", "7"]);
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("another configuration") && stderr.contains("seed"),
+        "{stderr}"
+    );
+    // --resume takes it over: files of the old seed are remade.
+    let stdout = ok(generate(
+        &out,
+        &["--split", "valid", "--seed", "7", "--resume"],
+    ));
+    assert!(stdout.contains("wrote 3 trajectories"), "{stdout}");
+
+    let foreign = dir.join("foreign");
+    std::fs::create_dir_all(&foreign).unwrap();
+    std::fs::write(foreign.join("notes.txt"), "mine").unwrap();
+    let output = generate(&foreign, &[]);
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains("not empty"));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_bad_config_key_names_the_file_and_the_key() {
+    let dir = scratch("dataset-config");
+    let config = dir.join("gen.toml");
+    std::fs::write(&config, "pool_probability = 0.5\nblock_sise = [2, 4]\n").unwrap();
+    let output = run(
+        &["dataset", "generate", "--out"],
+        &[&dir.join("data"), Path::new("--config"), &config],
+    );
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("gen.toml") && stderr.contains("block_sise"),
+        "{stderr}"
+    );
+    // A good one is used.
+    std::fs::write(&config, "pool_probability = 1.0\nsteps = 4\n").unwrap();
+    let data = dir.join("data");
+    ok(run(
+        &[
+            "dataset", "generate", "--split", "train", "--count", "2", "--out",
+        ],
+        &[&data, Path::new("--config"), &config],
+    ));
+    let m = read_metadata(&data).unwrap();
+    assert_eq!(m.sequence_length, 4);
+    assert_eq!(m.generator["params"]["pool_probability"], 1.0);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn render_writes_a_gif_and_stats_a_png() {
+    let dir = scratch("dataset-render");
+    let out = dir.join("data");
+    ok(generate(&out, &["--split", "test"]));
+    let gif = dir.join("t.gif");
+    let stdout = ok(run(
+        &[
+            "render",
+            "--split",
+            "test",
+            "--index",
+            "1",
+            "--frame-every",
+            "1",
+            "--out",
+        ],
+        &[&gif, &out],
+    ));
+    assert!(stdout.contains("6 pictures"), "{stdout}");
+    assert_eq!(&std::fs::read(&gif).unwrap()[..6], b"GIF89a");
+
+    let png = dir.join("n.png");
+    let stdout = ok(run(
+        &["dataset", "stats", "--split", "test", "--out"],
+        &[&png, &out],
+    ));
+    assert!(stdout.contains("3 of 3 trajectories"), "{stdout}");
+    assert!(stdout.contains("liquid    particles: min"), "{stdout}");
+    assert_eq!(&std::fs::read(&png).unwrap()[1..4], b"PNG");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn neighbour_counts_from_the_cell_list_match_brute_force() {
+    use phi::dataset::stats::{MAX_NEIGHBOURS, neighbour_histogram};
+    // Two frames of 300 pseudo-random particles, a third of them obstacles, some outside the
+    // bounds.
+    let mut state = 12345u64;
+    let mut next = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let n = 300;
+    let position: Vec<f32> = (0..2 * n * 2).map(|_| 0.05 + 0.9 * next()).collect();
+    let types: Vec<i64> = (0..n)
+        .map(|i| if i % 3 == 0 { OBSTACLE } else { LIQUID })
+        .collect();
+    let t = Trajectory::new(2, position.clone(), types.clone(), 0, 0).unwrap();
+    let radius = 0.07;
+    let histogram = neighbour_histogram(&t, &[[0.1, 0.9], [0.1, 0.9]], radius);
+    for frame in 0..2 {
+        let p = &position[frame * n * 2..(frame + 1) * n * 2];
+        let mut expected = vec![0u64; MAX_NEIGHBOURS + 1];
+        for i in (0..n).filter(|&i| types[i] == LIQUID) {
+            let count = (0..n)
+                .filter(|&j| {
+                    let (dx, dy) = (p[2 * i] - p[2 * j], p[2 * i + 1] - p[2 * j + 1]);
+                    j != i && dx * dx + dy * dy <= radius * radius
+                })
+                .count();
+            expected[count.min(MAX_NEIGHBOURS)] += 1;
+        }
+        assert_eq!(histogram[frame], expected, "frame {frame}");
+    }
+}
+
+#[test]
+fn export_to_tfrecord_and_npz_and_import_back() {
+    let dir = scratch("dataset-export");
+    let data = dir.join("data");
+    ok(generate(&data, &["--split", "train"]));
+    let records = dir.join("records");
+    ok(run(
+        &["dataset", "export", "--format", "tfrecord", "--out"],
+        &[&records, &data],
+    ));
+    assert!(records.join("train.tfrecord").is_file());
+    let back = dir.join("back");
+    ok(run(&["dataset", "import", "--out"], &[&back, &records]));
+    assert_eq!(files(&data), files(&back));
+    Dataset::open(&back).unwrap();
+
+    let arrays = dir.join("arrays");
+    ok(run(
+        &["dataset", "export", "--format", "npz", "--out"],
+        &[&arrays, &data],
+    ));
+    let exported = phi::output::read_npz(arrays.join("train.npz")).unwrap();
+    let original = read_trajectory(&data.join("train/traj_00001.npz")).unwrap();
+    let (_, position) = exported
+        .iter()
+        .find(|(name, _)| name == "trajectory_1_position")
+        .expect("trajectory 1 exported");
+    assert_eq!(
+        position.shape,
+        vec![original.frames, original.particles, original.dim]
+    );
+    assert_eq!(position.as_f32().unwrap(), &original.position[..]);
+    let _ = std::fs::remove_dir_all(dir);
+}
