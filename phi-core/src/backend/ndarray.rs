@@ -502,13 +502,19 @@ impl Backend for NdArray {
         let mut count = vec![0.0f32; sites * mask_channels];
         let mut scratch = Vec::new();
         for _ in 0..cells {
-            for (site, (value, m)) in v
-                .chunks_exact(channels)
-                .zip(mask.chunks_exact(mask_channels))
-                .enumerate()
-            {
-                for (k, &x) in value.iter().enumerate() {
-                    sum[site * channels + k] = x * m[k % mask_channels];
+            if mask_channels == 1 {
+                for ((s, value), &m) in sum
+                    .chunks_exact_mut(channels)
+                    .zip(v.chunks_exact(channels))
+                    .zip(&mask)
+                {
+                    for (s, &x) in s.iter_mut().zip(value) {
+                        *s = x * m;
+                    }
+                }
+            } else {
+                for ((s, &x), &m) in sum.iter_mut().zip(&v).zip(&mask) {
+                    *s = x * m;
                 }
             }
             count.copy_from_slice(&mask);
@@ -516,7 +522,11 @@ impl Backend for NdArray {
             box_sum_in_place(&mut count, grid, mask_channels, &mut scratch);
             for site in 0..sites {
                 for k in 0..channels {
-                    let mk = site * mask_channels + k % mask_channels;
+                    let mk = if mask_channels == 1 {
+                        site
+                    } else {
+                        site * channels + k
+                    };
                     let (n, was_valid) = (count[mk], mask[mk]);
                     let reached = if n > 0.0 { 1.0 } else { 0.0 };
                     let empty = if n <= 0.0 { 1.0 } else { 0.0 };
@@ -541,22 +551,46 @@ impl Backend for NdArray {
 fn box_sum_in_place(data: &mut [f32], grid: &[usize], channels: usize, scratch: &mut Vec<f32>) {
     for (axis, &n) in grid.iter().enumerate() {
         let inner = grid[axis + 1..].iter().product::<usize>() * channels;
-        let outer: usize = grid[..axis].iter().product();
+        let block = n * inner;
+        if block == 0 {
+            return;
+        }
         scratch.clear();
         scratch.extend_from_slice(data);
-        for o in 0..outer {
-            let base = o * n * inner;
+        for (src, dst) in scratch
+            .chunks_exact(block)
+            .zip(data.chunks_exact_mut(block))
+        {
+            // Rows of `inner` values along the axis; missing neighbours are zeros.
             for i in 0..n {
-                let row = base + i * inner;
-                for k in 0..inner {
-                    let centre = scratch[row + k];
-                    let below = if i > 0 { scratch[row - inner + k] } else { 0.0 };
-                    let above = if i + 1 < n {
-                        scratch[row + inner + k]
-                    } else {
-                        0.0
-                    };
-                    data[row + k] = (below + centre) + above;
+                let out = &mut dst[i * inner..(i + 1) * inner];
+                let centre = &src[i * inner..(i + 1) * inner];
+                match (i > 0, i + 1 < n) {
+                    (true, true) => {
+                        let below = &src[(i - 1) * inner..i * inner];
+                        let above = &src[(i + 1) * inner..(i + 2) * inner];
+                        for (((o, &b), &c), &a) in out.iter_mut().zip(below).zip(centre).zip(above)
+                        {
+                            *o = (b + c) + a;
+                        }
+                    }
+                    (false, true) => {
+                        let above = &src[(i + 1) * inner..(i + 2) * inner];
+                        for ((o, &c), &a) in out.iter_mut().zip(centre).zip(above) {
+                            *o = (0.0 + c) + a;
+                        }
+                    }
+                    (true, false) => {
+                        let below = &src[(i - 1) * inner..i * inner];
+                        for ((o, &b), &c) in out.iter_mut().zip(below).zip(centre) {
+                            *o = (b + c) + 0.0;
+                        }
+                    }
+                    (false, false) => {
+                        for (o, &c) in out.iter_mut().zip(centre) {
+                            *o = (0.0 + c) + 0.0;
+                        }
+                    }
                 }
             }
         }
@@ -619,11 +653,25 @@ fn concat<T: Copy + Default + Send + Sync>(tensors: Vec<Tensor<T>>, axis: usize)
         .iter()
         .map(|t| (standard(t), t.shape()[axis] * inner))
         .collect();
-    let mut data = Vec::with_capacity(out_len(&shape));
-    for o in 0..outer {
-        for (part, block) in &parts {
-            data.extend_from_slice(&part[o * block..(o + 1) * block]);
+    let row: usize = parts.iter().map(|(_, block)| block).sum();
+    let mut data = vec![T::default(); out_len(&shape)];
+    if row == 0 {
+        return from_vec(data, &shape);
+    }
+    let mut at = 0;
+    for (part, block) in &parts {
+        if *block == 1 {
+            // Columns (e.g. per-axis samples joined into points): element by element, without a
+            // slice copy per element.
+            for (out, &x) in data[at..].iter_mut().step_by(row).zip(part.iter()) {
+                *out = x;
+            }
+        } else if *block > 0 {
+            for (o, out) in data.chunks_exact_mut(row).enumerate().take(outer) {
+                out[at..at + block].copy_from_slice(&part[o * block..(o + 1) * block]);
+            }
         }
+        at += block;
     }
     from_vec(data, &shape)
 }
