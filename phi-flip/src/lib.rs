@@ -9,6 +9,7 @@ mod random;
 mod scene;
 mod seed;
 mod sim;
+mod toml_file;
 
 pub use error::{FlipError, Result};
 pub use loss::Loss;

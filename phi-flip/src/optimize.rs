@@ -186,12 +186,7 @@ impl OptimizeConfig {
     /// # Errors
     /// [`FlipError::Scene`] naming the file, the key and the problem.
     pub fn from_file(path: &Path) -> Result<Self, FlipError> {
-        let name = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| FlipError::Scene {
-            path: name.clone(),
-            key: "(file)".into(),
-            reason: e.to_string(),
-        })?;
+        let (text, name) = crate::toml_file::read(path)?;
         Self::from_toml(&text, &name)
     }
 
@@ -200,24 +195,7 @@ impl OptimizeConfig {
     /// # Errors
     /// [`FlipError::Scene`] naming `origin`, the key and the problem.
     pub fn from_toml(text: &str, origin: &str) -> Result<Self, FlipError> {
-        let error = |key: String, reason: String| FlipError::Scene {
-            path: origin.into(),
-            key,
-            reason,
-        };
-        let deserializer = toml::Deserializer::parse(text)
-            .map_err(|e| error(location(text, e.span()), e.message().to_string()))?;
-        let config: OptimizeConfig =
-            serde_path_to_error::deserialize(deserializer).map_err(|e| {
-                let key = e.path().to_string();
-                let inner = e.into_inner();
-                let key = if key == "." {
-                    location(text, inner.span())
-                } else {
-                    key
-                };
-                error(key, inner.message().to_string())
-            })?;
+        let config: OptimizeConfig = crate::toml_file::parse(text, origin)?;
         config.validate(origin)?;
         Ok(config)
     }
@@ -231,14 +209,7 @@ impl OptimizeConfig {
         // The scene's own checks, with its keys under `scene.`.
         let scene_text =
             toml::to_string(&self.scene).map_err(|e| error("scene".into(), e.to_string()))?;
-        Scene::from_toml(&scene_text, origin).map_err(|e| match e {
-            FlipError::Scene { path, key, reason } => FlipError::Scene {
-                path,
-                key: format!("scene.{key}"),
-                reason,
-            },
-            other => other,
-        })?;
+        Scene::from_toml(&scene_text, origin).map_err(|e| crate::toml_file::under("scene", e))?;
         if self.scene.liquids.is_empty() {
             return Err(error(
                 "scene.liquid".into(),
@@ -324,14 +295,10 @@ impl OptimizeConfig {
             key: key.into(),
             reason,
         };
-        let setup = self.scene.build::<B>(origin, device).map_err(|e| match e {
-            FlipError::Scene { path, key, reason } => FlipError::Scene {
-                path,
-                key: format!("scene.{key}"),
-                reason,
-            },
-            other => other,
-        })?;
+        let setup = self
+            .scene
+            .build::<B>(origin, device)
+            .map_err(|e| crate::toml_file::under("scene", e))?;
         let simulation = setup.simulation;
         let d = self.scene.dim();
         let s = &self.scene.simulation;
@@ -402,19 +369,6 @@ impl OptimizeConfig {
             iterations: self.optimize.iterations,
             divergence_factor: self.optimize.divergence_factor,
         })
-    }
-}
-
-/// `line L, column C` of a byte span in `text`.
-fn location(text: &str, span: Option<std::ops::Range<usize>>) -> String {
-    match span {
-        Some(span) => {
-            let before = &text[..span.start.min(text.len())];
-            let line = before.matches('\n').count() + 1;
-            let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
-            format!("line {line}, column {column}")
-        }
-        None => "(document)".into(),
     }
 }
 

@@ -181,29 +181,7 @@ impl RandomSceneParams {
     /// # Errors
     /// [`FlipError::Scene`] naming `origin`, the key and the problem (unknown keys included).
     pub fn from_toml(text: &str, origin: &str) -> Result<Self> {
-        let deserializer = toml::Deserializer::parse(text).map_err(|e| FlipError::Scene {
-            path: origin.into(),
-            key: "(syntax)".into(),
-            reason: e.message().to_string(),
-        })?;
-        let params: Self = serde_path_to_error::deserialize(deserializer).map_err(|e| {
-            let key = e.path().to_string();
-            let reason = e.into_inner().message().to_string();
-            // An unknown key is reported at the document level; name it from the message.
-            let key = if key == "." {
-                reason
-                    .split('`')
-                    .nth(1)
-                    .map_or_else(|| "(document)".to_string(), str::to_string)
-            } else {
-                key
-            };
-            FlipError::Scene {
-                path: origin.into(),
-                key,
-                reason,
-            }
-        })?;
+        let params: Self = crate::toml_file::parse(text, origin)?;
         params.validate(origin)?;
         Ok(params)
     }
@@ -213,12 +191,7 @@ impl RandomSceneParams {
     /// # Errors
     /// [`FlipError::Scene`] naming the file, the key and the problem.
     pub fn from_file(path: &std::path::Path) -> Result<Self> {
-        let name = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| FlipError::Scene {
-            path: name.clone(),
-            key: "(file)".into(),
-            reason: e.to_string(),
-        })?;
+        let (text, name) = crate::toml_file::read(path)?;
         Self::from_toml(&text, &name)
     }
 

@@ -258,12 +258,7 @@ impl Scene {
     /// # Errors
     /// [`FlipError::Scene`] naming the file, the key and the problem.
     pub fn from_file(path: &Path) -> Result<Self> {
-        let name = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| FlipError::Scene {
-            path: name.clone(),
-            key: "(file)".into(),
-            reason: e.to_string(),
-        })?;
+        let (text, name) = crate::toml_file::read(path)?;
         Self::from_toml(&text, &name)
     }
 
@@ -272,24 +267,7 @@ impl Scene {
     /// # Errors
     /// [`FlipError::Scene`] naming `origin`, the key and the problem.
     pub fn from_toml(text: &str, origin: &str) -> Result<Self> {
-        let deserializer = toml::Deserializer::parse(text).map_err(|e| FlipError::Scene {
-            path: origin.into(),
-            key: location(text, e.span()),
-            reason: e.message().to_string(),
-        })?;
-        let scene: Scene = serde_path_to_error::deserialize(deserializer).map_err(|e| {
-            let key = e.path().to_string();
-            let inner = e.into_inner();
-            FlipError::Scene {
-                path: origin.into(),
-                key: if key == "." {
-                    location(text, inner.span())
-                } else {
-                    key
-                },
-                reason: inner.message().to_string(),
-            }
-        })?;
+        let scene: Scene = crate::toml_file::parse(text, origin)?;
         scene.validate(origin)?;
         Ok(scene)
     }
@@ -618,18 +596,5 @@ impl Scene {
             particles,
             steps: s.steps,
         })
-    }
-}
-
-/// `line L, column C` of a byte span in `text`.
-fn location(text: &str, span: Option<std::ops::Range<usize>>) -> String {
-    match span {
-        Some(span) => {
-            let before = &text[..span.start.min(text.len())];
-            let line = before.matches('\n').count() + 1;
-            let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
-            format!("line {line}, column {column}")
-        }
-        None => "(document)".into(),
     }
 }

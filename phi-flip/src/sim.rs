@@ -256,6 +256,8 @@ pub struct FlipSimulation<B: Backend> {
     obstacle_union: Option<Geometry>,
     /// Whether the CFL warning was logged (once per simulation; later ones go to `debug`).
     cfl_warned: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    /// [`FlipSimulation::scene_parameters`], built once: what [`FlipSimulation::step`] uses.
+    defaults: SceneParameters<B>,
 }
 
 impl<B: Backend> FlipSimulation<B> {
@@ -306,6 +308,17 @@ impl<B: Backend> FlipSimulation<B> {
                 obstacles.iter().map(|o| o.geometry().clone()).collect(),
             )?),
         };
+        let defaults = SceneParameters {
+            gravity: Tensor::from_vec(params.gravity.clone(), &[d], device)?,
+            obstacle_offsets: obstacles
+                .iter()
+                .map(|_| Tensor::zeros(&[1, d], device))
+                .collect(),
+            inflow_velocities: inflows
+                .iter()
+                .map(|f| Tensor::from_vec(f.velocity.clone(), &[1, d], device))
+                .collect::<std::result::Result<_, _>>()?,
+        };
         let mut simulation = Self {
             domain,
             params,
@@ -316,6 +329,7 @@ impl<B: Backend> FlipSimulation<B> {
             static_masks: None,
             obstacle_union,
             cfl_warned: Default::default(),
+            defaults,
         };
         if !simulation.obstacles.iter().any(Obstacle::is_moving) {
             simulation.static_masks = Some(simulation.obstacle_masks(0.0, &[])?);
@@ -371,21 +385,7 @@ impl<B: Backend> FlipSimulation<B> {
     /// # Errors
     /// Only tensor errors.
     pub fn scene_parameters(&self) -> Result<SceneParameters<B>> {
-        let d = self.domain.dim();
-        let device = &self.device;
-        Ok(SceneParameters {
-            gravity: Tensor::from_vec(self.params.gravity.clone(), &[d], device)?,
-            obstacle_offsets: self
-                .obstacles
-                .iter()
-                .map(|_| Tensor::zeros(&[1, d], device))
-                .collect(),
-            inflow_velocities: self
-                .inflows
-                .iter()
-                .map(|f| Tensor::from_vec(f.velocity.clone(), &[1, d], device))
-                .collect::<std::result::Result<_, _>>()?,
-        })
+        Ok(self.defaults.clone())
     }
 
     /// Checks that `scene` fits this simulation (shapes and counts).
@@ -542,7 +542,7 @@ impl<B: Backend> FlipSimulation<B> {
     /// # Errors
     /// Only tensor errors.
     pub fn emit(&self, particles: &Particles<B>, step: usize) -> Result<Particles<B>> {
-        self.emit_with(particles, step, &self.scene_parameters()?)
+        self.emit_with(particles, step, &self.defaults)
     }
 
     /// [`emit`](Self::emit) with the inflow velocities of `scene`.
@@ -600,7 +600,7 @@ impl<B: Backend> FlipSimulation<B> {
     /// [`FlipError::Solve`] when the pressure solve fails, [`FlipError::NonFinite`] when the new
     /// state is not finite.
     pub fn step(&self, particles: &Particles<B>, step: usize) -> Result<(Particles<B>, StepStats)> {
-        self.step_with(particles, step, &self.scene_parameters()?)
+        self.step_with(particles, step, &self.defaults)
     }
 
     /// [`step`](Self::step) with the scene parameters `scene` (gravity, obstacle offsets, inflow

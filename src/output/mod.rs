@@ -35,18 +35,8 @@ pub use render::{
 /// Errors of the output module.
 #[derive(Debug, thiserror::Error)]
 pub enum OutputError {
-    /// An operating-system I/O operation on `path` failed.
-    #[error("{action} '{path}': {source}", path = path.display())]
-    Io {
-        /// The file (or directory) involved.
-        path: PathBuf,
-        /// What was being done, e.g. "cannot create".
-        action: &'static str,
-        /// The underlying error.
-        #[source]
-        source: std::io::Error,
-    },
-    /// Reading or writing a NumPy file failed ([`phi_core::io`]); the error names the file.
+    /// A file operation failed: an operating-system error, or a NumPy file that is damaged or
+    /// unsupported ([`phi_core::io`]); the error names the file.
     #[error(transparent)]
     File(#[from] IoError),
     /// The arguments of a function are inconsistent (wrong lengths, empty domain, ...).
@@ -75,11 +65,7 @@ pub enum OutputError {
 impl OutputError {
     /// Wraps an I/O error with the path and the action that failed.
     pub(crate) fn io(path: &Path, action: &'static str, source: std::io::Error) -> Self {
-        OutputError::Io {
-            path: path.to_path_buf(),
-            action,
-            source,
-        }
+        OutputError::File(IoError::io(path, action, source))
     }
 }
 

@@ -930,13 +930,6 @@ impl LatticeIndexer {
             shape: lattice.shape.clone(),
         }
     }
-
-    #[inline(always)]
-    fn continuous(&self, x: f32, axis: usize) -> f32 {
-        ((x - self.origin[axis]) * self.inverse_spacing[axis])
-            .max(0.0)
-            .min(self.upper[axis])
-    }
 }
 
 /// The flat offset of each corner from the lower corner (independent of the point).
@@ -974,17 +967,24 @@ impl<const D: usize> FixedIndexer<D> {
         }
     }
 
+    /// The continuous sample index of coordinate `x` along `axis`, `(x − origin) / spacing`
+    /// clamped to `[0, shape − 1]`, as the composite computes it.
+    #[inline(always)]
+    fn continuous(&self, x: f32, axis: usize) -> f32 {
+        ((x - self.origin[axis]) * self.inverse_spacing[axis])
+            .max(0.0)
+            .min(self.upper[axis])
+    }
+
     /// The flat lower corner and the fractions of `point`: the continuous index
     /// `(x − origin) / spacing` clamped to `[0, shape − 1]`, its integer part capped at
-    /// `shape − 2`, as [`LatticeIndexer::continuous`] and the composite compute it.
+    /// `shape − 2`, as the composite computes it.
     #[inline(always)]
     fn lower_corner(&self, point: &[f32]) -> (usize, [f32; D]) {
         let mut flat = 0;
         let mut fraction = [0.0f32; D];
         for axis in 0..D {
-            let t = ((point[axis] - self.origin[axis]) * self.inverse_spacing[axis])
-                .max(0.0)
-                .min(self.upper[axis]);
+            let t = self.continuous(point[axis], axis);
             let b = (t as u32 as f32).min(self.highest_base[axis]);
             flat += b as usize * self.strides[axis];
             fraction[axis] = t - b;
@@ -1054,6 +1054,7 @@ fn splat_kernel<const D: usize>(
     transfer: Transfer,
     (sums, weights): (&mut [f32], &mut [f32]),
 ) {
+    let fixed = FixedIndexer::<D>::new(indexer);
     let mut add = |at: usize, value: &[f32], weight: f32| {
         for (s, &x) in sums[at * c..(at + 1) * c].iter_mut().zip(value) {
             *s += x * weight;
@@ -1063,12 +1064,11 @@ fn splat_kernel<const D: usize>(
     match transfer {
         Transfer::NearestFace => {
             for (point, value) in p.chunks_exact(D).zip(v.chunks_exact(c)) {
-                add(nearest_sample::<D>(indexer, point), value, 1.0);
+                add(nearest_sample(&fixed, point), value, 1.0);
             }
         }
         Transfer::Linear => {
             let offsets = corner_offsets::<D>(indexer);
-            let fixed = FixedIndexer::<D>::new(indexer);
             let stencils: Vec<(usize, [f32; D])> = p
                 .chunks_exact(D)
                 .map(|point| fixed.lower_corner(point))
@@ -1084,7 +1084,7 @@ fn splat_kernel<const D: usize>(
 
 /// The flat index of the sample nearest to `point`.
 #[inline(always)]
-fn nearest_sample<const D: usize>(indexer: &LatticeIndexer, point: &[f32]) -> usize {
+fn nearest_sample<const D: usize>(indexer: &FixedIndexer<D>, point: &[f32]) -> usize {
     (0..D)
         .map(|axis| {
             let t = indexer.continuous(point[axis], axis) + 0.5;

@@ -273,7 +273,7 @@ pub(super) fn cholesky(matrix: &SparseMatrix) -> Result<Arc<CholeskyFactor>, Sol
                 method: "Cholesky",
                 reason,
             };
-            if let Some(order) = &matrix.ordering_arc() {
+            if let Some(order) = &matrix.ordering {
                 return ordered_cholesky(matrix, order.clone()).map(Arc::new);
             }
             let entries = lower_triplets(matrix, true);

@@ -26,7 +26,7 @@ pub struct SparseMatrix {
     pub(super) ic0: OnceLock<Option<Arc<IncompleteCholesky>>>,
     /// A fill-reducing elimination order for the Cholesky factorization (see
     /// [`SparseMatrix::with_ordering`]); `None`: faer computes an AMD ordering.
-    ordering: Option<Arc<[usize]>>,
+    pub(super) ordering: Option<Arc<[usize]>>,
     solves: AtomicUsize,
     factorizations: AtomicUsize,
 }
@@ -372,10 +372,6 @@ impl SparseMatrix {
     /// The elimination order given by [`SparseMatrix::with_ordering`], if any.
     pub fn ordering(&self) -> Option<&[usize]> {
         self.ordering.as_deref()
-    }
-
-    pub(super) fn ordering_arc(&self) -> Option<Arc<[usize]>> {
-        self.ordering.clone()
     }
 
     /// Records that the matrix is symmetric, for a builder that guarantees it by construction
