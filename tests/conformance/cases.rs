@@ -108,8 +108,10 @@ impl Case {
             Case::Reshape | Case::Permute | Case::Slice | Case::Pad(_) => {
                 vec![(vec![2, 3, 4], values(24, -1.0, 1.0, 31))]
             }
+            // A one-wide column too: the ndarray kernel copies those element by element.
             Case::Concat => vec![
                 (vec![2, 3], values(6, -1.0, 1.0, 32)),
+                (vec![2, 1], values(2, -1.0, 1.0, 34)),
                 (vec![2, 2], values(4, -1.0, 1.0, 33)),
             ],
             Case::Stack => vec![
