@@ -2,8 +2,9 @@
 
 use phi_core::backend::Backend;
 use phi_core::fields::{
-    CenteredGrid, Domain, PointCloud, ProjectionMasks, StaggeredGrid, Transfer, extrapolate_valid,
-    occupied_cells, particles_to_staggered, pressure_projection, sample_staggered, valid_faces,
+    CenteredGrid, Domain, Integrator, PointCloud, ProjectionMasks, StaggeredGrid, Transfer,
+    advect_points, extrapolate_valid, occupied_cells, particles_to_staggered, pressure_projection,
+    sample_staggered, valid_faces,
 };
 use phi_core::solve::{SolveOptions, SolveStats};
 use phi_core::{Tensor, TensorError};
@@ -707,7 +708,7 @@ impl<B: Backend> FlipSimulation<B> {
         let layers = (reach_cells.ceil() as usize + 2)
             .min(domain.resolution().iter().copied().max().unwrap_or(1));
         let (advection_field, _) = extrapolate_valid(&velocity, &valid, layers)?;
-        let advected = rk4(positions, &advection_field, dt)?;
+        let advected = advect_points(positions, &advection_field, dt, Integrator::Rk4)?;
 
         // 6. Out of the obstacles, into the domain.
         //    Each obstacle pushes in its own frame, `push(x − c) + c`, so that the gradient
@@ -766,15 +767,6 @@ impl<B: Backend> FlipSimulation<B> {
             stats,
         ))
     }
-}
-
-/// Classical RK4 through a frozen staggered field.
-fn rk4<B: Backend>(points: &Tensor<B>, velocity: &StaggeredGrid<B>, dt: f32) -> Result<Tensor<B>> {
-    let k1 = sample_staggered(velocity, points)?;
-    let k2 = sample_staggered(velocity, &(points + &(&k1 * (0.5 * dt))))?;
-    let k3 = sample_staggered(velocity, &(points + &(&k2 * (0.5 * dt))))?;
-    let k4 = sample_staggered(velocity, &(points + &(&k3 * dt)))?;
-    Ok(points + &((k1 + k4 + (k2 + k3) * 2.0) * (dt / 6.0)))
 }
 
 /// Points clamped into the closed box of the domain (a point on the upper side belongs to the

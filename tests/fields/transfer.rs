@@ -1,9 +1,9 @@
 //! Sampling, particle ↔ grid transfers and extrapolation.
 
 use phi_core::fields::{
-    Boundary, CenteredGrid, Domain, PointCloud, StaggeredGrid, Transfer, extrapolate_valid,
-    occupied_cells, particles_to_centered, particles_to_staggered, sample_centered,
-    sample_staggered, valid_faces,
+    Boundary, CenteredGrid, Domain, Integrator, PointCloud, StaggeredGrid, Transfer, advect_points,
+    extrapolate_valid, occupied_cells, particles_to_centered, particles_to_staggered,
+    sample_centered, sample_staggered, valid_faces,
 };
 use phi_core::{Backend, Tensor};
 
@@ -15,6 +15,7 @@ crate::conformance::for_each_backend!(
     transfer_conserves_weights,
     particles_to_centered_density,
     extrapolation_fills_exactly_the_requested_layers,
+    point_advection_integrates_a_linear_field,
 );
 
 /// Two particles per cell and axis at `(i + ¼) Δx` and `(i + ¾) Δx` (the usual FLIP seeding),
@@ -395,4 +396,54 @@ fn extrapolation_fills_exactly_the_requested_layers<B: Backend>() {
     let (out, grown) = extrapolate_valid(&field, &mask, 1).unwrap();
     assert_eq!(out.values().to_vec(), vec![1.0, 2.0, 1.0, 2.0, 1.0, 2.0]);
     assert_eq!(grown.values().to_vec(), vec![1.0, 1.0, 1.0]);
+}
+
+/// Points in `u_i = a_i x_i`, which multilinear sampling reproduces exactly inside the faces:
+/// one Euler step is `x (1 + z)` and one RK4 step `x (1 + z + z²/2 + z³/6 + z⁴/24)` with
+/// `z = a_i Δt`, the Taylor polynomial of the exact `x e^{z}` to fourth order, in 2D and 3D.
+fn point_advection_integrates_a_linear_field<B: Backend>() {
+    const RATES: [f32; 3] = [0.8, -1.2, 0.5];
+    let dev = B::default_device();
+    for d in [2usize, 3] {
+        let res = vec![8; d];
+        let domain = domain(&res, &vec![-2.0; d], &vec![2.0; d], Boundary::Closed);
+        let u =
+            StaggeredGrid::<B>::from_fn(&domain, &dev, |axis, x| RATES[axis] * x[axis]).unwrap();
+        // Start and all RK4 stages well inside every component's lattice.
+        let points: Vec<f32> = (0..5 * d)
+            .map(|k| -0.9 + 0.37 * (k % 5) as f32 + 0.05 * (k / 5) as f32)
+            .collect();
+        let n = points.len() / d;
+        let dt = 0.4;
+        for (integrator, order) in [(Integrator::Euler, 1), (Integrator::Rk4, 4)] {
+            let moved = advect_points(&tensor::<B>(&[n, d], &points), &u, dt, integrator).unwrap();
+            assert_eq!(moved.shape(), vec![n, d]);
+            let taylor = |z: f64| {
+                let mut term = 1.0;
+                let mut sum = 1.0;
+                for k in 1..=order {
+                    term *= z / f64::from(k);
+                    sum += term;
+                }
+                sum
+            };
+            for (i, (&got, &x)) in moved.to_vec().iter().zip(&points).enumerate() {
+                let z = f64::from(RATES[i % d]) * f64::from(dt);
+                let want = f64::from(x) * taylor(z);
+                assert!(
+                    (f64::from(got) - want).abs() < 2e-6,
+                    "{d}D {integrator:?}: point {i} moved to {got}, want {want}"
+                );
+                // Euler and RK4 differ from the exact flow as their orders say.
+                let exact = f64::from(x) * z.exp();
+                let bound = 1.5 * f64::from(x).abs() * z.abs().powi(order as i32 + 1)
+                    / (1..=order + 1).product::<i32>() as f64;
+                assert!(
+                    (f64::from(got) - exact).abs() <= bound + 2e-6,
+                    "{d}D {integrator:?}: point {i} is {} from the exact flow (bound {bound})",
+                    (f64::from(got) - exact).abs()
+                );
+            }
+        }
+    }
 }

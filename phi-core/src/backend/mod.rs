@@ -645,6 +645,28 @@ pub trait Backend: Copy + Clone + Debug + Default + Send + Sync + 'static {
         crate::fields::sample::composite_lattice_splat::<Self>(lattice, points, values, transfer)
     }
 
+    /// `points [N, d]` moved over `dt` through a frozen staggered velocity by `integrator`
+    /// ([`advect_points`](crate::fields::advect_points)): component `i` of the velocity is
+    /// `components[i]` (`[samples_i, 1]`) on `lattices[i]`, sampled as
+    /// [`Backend::float_lattice_sample`] samples. Returns `[N, d]`. The default is built from the
+    /// primitive operations (differentiable in the points and the velocity); a backend may
+    /// override it with a fused kernel giving the same values, which spares the intermediate
+    /// tensors of RK4's four stages.
+    ///
+    /// # Errors
+    /// Only shape errors, which the callers in [`crate::fields`] rule out.
+    fn float_advect_points(
+        lattices: &[crate::fields::SampleLattice],
+        components: &[Self::Float],
+        points: Self::Float,
+        dt: f32,
+        integrator: crate::fields::Integrator,
+    ) -> Result<Self::Float> {
+        crate::fields::sample::composite_advect_points::<Self>(
+            lattices, components, points, dt, integrator,
+        )
+    }
+
     /// Grows the valid region of `values` by `cells` layers, as
     /// [`extrapolate_valid_tensor`](crate::fields::extrapolate_valid_tensor) documents: returns
     /// `(values, valid)`. `valid` is a `0/1` mask matching `values` on the first `spatial_dims`

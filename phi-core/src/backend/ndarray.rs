@@ -21,7 +21,7 @@ use rayon::prelude::*;
 
 use super::{Backend, BinaryOp, CompareOp, IntBinaryOp, PadMode, ReduceOp, UnaryOp};
 use crate::error::{Result, TensorError};
-use crate::fields::{SampleLattice, Transfer};
+use crate::fields::{Integrator, SampleLattice, Transfer};
 
 /// The CPU backend on ndarray and rayon. Forward only: gradients need the Burn or tch backend.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -467,6 +467,25 @@ impl Backend for NdArray {
             from_vec(sums, &[samples, c]),
             from_vec(weights, &[samples, 1]),
         ))
+    }
+
+    fn float_advect_points(
+        lattices: &[SampleLattice],
+        components: &[Self::Float],
+        points: Self::Float,
+        dt: f32,
+        integrator: Integrator,
+    ) -> Result<Self::Float> {
+        let shape = points.shape().to_vec();
+        let p = standard(&points);
+        let values: Vec<Cow<'_, [f32]>> = components.iter().map(standard).collect();
+        let values: Vec<&[f32]> = values.iter().map(|v| &v[..]).collect();
+        let out = match lattices.len() {
+            1 => advect_kernel::<1>(lattices, &values, &p, dt, integrator),
+            2 => advect_kernel::<2>(lattices, &values, &p, dt, integrator),
+            _ => advect_kernel::<3>(lattices, &values, &p, dt, integrator),
+        };
+        Ok(from_vec(out, &shape))
     }
 
     fn float_extrapolate_valid(
@@ -1041,6 +1060,115 @@ fn sample_kernel<const D: usize>(
             }
         }
     }
+}
+
+/// One staggered component ready for point queries: the lattice's index arithmetic, its corner
+/// offsets and its values `[samples]`.
+struct ComponentSampler<'a, const D: usize> {
+    indexer: FixedIndexer<D>,
+    offsets: [usize; 8],
+    values: &'a [f32],
+}
+
+impl<'a, const D: usize> ComponentSampler<'a, D> {
+    fn new(lattice: &SampleLattice, values: &'a [f32]) -> Self {
+        let indexer = LatticeIndexer::new(lattice);
+        Self {
+            indexer: FixedIndexer::new(&indexer),
+            offsets: corner_offsets::<D>(&indexer),
+            values,
+        }
+    }
+
+    /// The value at `point`, as [`sample_kernel`]'s one-channel loop computes it.
+    #[inline(always)]
+    fn sample(&self, point: &[f32; D]) -> f32 {
+        let (flat, fraction) = self.indexer.lower_corner(point);
+        let mut sum = 0.0f32;
+        for (corner, &offset) in self.offsets.iter().enumerate().take(1 << D) {
+            sum += self.values[flat + offset] * corner_weight::<D>(corner, &fraction);
+        }
+        sum
+    }
+}
+
+/// Points moved through a staggered velocity as
+/// [`composite_advect_points`](crate::fields::sample::composite_advect_points) moves them, every
+/// stage of one point in registers: the same operations in the same order, so the same values.
+#[allow(clippy::needless_range_loop)] // index loops over [f32; D] unroll into registers
+fn advect_kernel<const D: usize>(
+    lattices: &[SampleLattice],
+    values: &[&[f32]],
+    p: &[f32],
+    dt: f32,
+    integrator: Integrator,
+) -> Vec<f32> {
+    let components: Vec<ComponentSampler<'_, D>> = lattices
+        .iter()
+        .zip(values)
+        .map(|(lattice, values)| ComponentSampler::new(lattice, values))
+        .collect();
+    let components = &components[..D];
+    // Plain loops over fixed-size arrays: the compiler unrolls them and keeps the stages in
+    // registers.
+    #[inline(always)]
+    fn velocity<const D: usize>(components: &[ComponentSampler<'_, D>], x: &[f32; D]) -> [f32; D] {
+        let mut k = [0.0f32; D];
+        for a in 0..D {
+            k[a] = components[a].sample(x);
+        }
+        k
+    }
+    #[inline(always)]
+    fn step<const D: usize>(x: &[f32; D], k: &[f32; D], h: f32) -> [f32; D] {
+        let mut y = [0.0f32; D];
+        for a in 0..D {
+            y[a] = x[a] + k[a] * h;
+        }
+        y
+    }
+    // The points go in blocks, stage by stage: each stage depends on the one before, so the
+    // independent points of a block are what keeps the pipeline full.
+    const BLOCK: usize = 16;
+    let (half, sixth) = (0.5 * dt, dt / 6.0);
+    let mut out = vec![0.0f32; p.len()];
+    let mut stages = [[[0.0f32; D]; BLOCK]; 4];
+    let mut at = [[0.0f32; D]; BLOCK];
+    for (points, o) in p.chunks(D * BLOCK).zip(out.chunks_mut(D * BLOCK)) {
+        let count = points.len() / D;
+        let mut x = [[0.0f32; D]; BLOCK];
+        for (xi, point) in x.iter_mut().zip(points.chunks_exact(D)) {
+            xi.copy_from_slice(point);
+        }
+        let (x, moved) = (&x[..count], o);
+        match integrator {
+            Integrator::Euler => {
+                for (xi, o) in x.iter().zip(moved.chunks_exact_mut(D)) {
+                    o.copy_from_slice(&step(xi, &velocity(components, xi), dt));
+                }
+            }
+            Integrator::Rk4 => {
+                for (k, xi) in stages[0].iter_mut().zip(x) {
+                    *k = velocity(components, xi);
+                }
+                for (stage, h) in [(1, half), (2, half), (3, dt)] {
+                    for ((y, xi), k) in at.iter_mut().zip(x).zip(&stages[stage - 1]) {
+                        *y = step(xi, k, h);
+                    }
+                    for (k, y) in stages[stage].iter_mut().zip(&at[..count]) {
+                        *k = velocity(components, y);
+                    }
+                }
+                let [k1, k2, k3, k4] = &stages;
+                for (i, (xi, o)) in x.iter().zip(moved.chunks_exact_mut(D)).enumerate() {
+                    for a in 0..D {
+                        o[a] = xi[a] + (k1[i][a] + k4[i][a] + (k2[i][a] + k3[i][a]) * 2.0) * sixth;
+                    }
+                }
+            }
+        }
+    }
+    out
 }
 
 /// [`Backend::float_lattice_splat`] on a `D`-dimensional lattice into `(sums [samples, c],

@@ -6,7 +6,7 @@ use crate::tensor::Tensor;
 
 use super::extrapolate::GridField;
 use super::grid::{CenteredGrid, StaggeredGrid, cell_centers, face_centers};
-use super::sample::{sample_centered, sample_face_component, sample_staggered};
+use super::sample::{sample_centered, sample_face_component, sample_staggered, staggered_lattices};
 
 /// Semi-Lagrangian advection of a grid through `velocity` over `dt`:
 /// `f_new(x) = f(x − Δt · u(x))`, each sample traced back from its own position (cell centres,
@@ -70,7 +70,11 @@ pub enum Integrator {
 }
 
 /// `points [N, d]` moved through the (frozen) staggered `velocity` over `dt`, the velocity
-/// sampled with [`sample_staggered`]. Differentiable in the points and the velocity.
+/// sampled as [`sample_staggered`] samples it: Euler `x + Δt u(x)`, or RK4
+/// `x + Δt/6 (k₁ + 2k₂ + 2k₃ + k₄)` with `k₁ = u(x)`, `k₂ = u(x + Δt/2 k₁)`,
+/// `k₃ = u(x + Δt/2 k₂)`, `k₄ = u(x + Δt k₃)`. Through [`Backend::float_advect_points`], one
+/// fused pass over the points on the ndarray backend. Differentiable in the points and the
+/// velocity.
 ///
 /// # Errors
 /// [`TensorError::InvalidArgument`] when `points` is not `[N, d]`.
@@ -88,15 +92,18 @@ pub fn advect_points<B: Backend>(
             reason: format!("points must be [N, {}]", velocity.domain().dim()),
         });
     }
-    match integrator {
-        Integrator::Euler => Ok(points + &(sample_staggered(velocity, points)? * dt)),
-        Integrator::Rk4 => {
-            let k1 = sample_staggered(velocity, points)?;
-            let k2 = sample_staggered(velocity, &(points + &(&k1 * (0.5 * dt))))?;
-            let k3 = sample_staggered(velocity, &(points + &(&k2 * (0.5 * dt))))?;
-            let k4 = sample_staggered(velocity, &(points + &(&k3 * dt)))?;
-            let slope = (k1 + k4 + (k2 + k3) * 2.0) * (dt / 6.0);
-            Ok(points + &slope)
-        }
-    }
+    let lattices = staggered_lattices(velocity.domain());
+    let components = velocity
+        .components()
+        .iter()
+        .map(|c| Ok(c.reshape(&[c.numel(), 1])?.into_primitive()))
+        .collect::<Result<Vec<_>>>()?;
+    let moved = B::float_advect_points(
+        &lattices,
+        &components,
+        points.primitive().clone(),
+        dt,
+        integrator,
+    )?;
+    Ok(Tensor::from_primitive(moved))
 }

@@ -14,6 +14,7 @@ use crate::backend::{Backend, IntBinaryOp, ReduceOp};
 use crate::error::{Result, TensorError};
 use crate::tensor::{IntTensor, Tensor};
 
+use super::advect::Integrator;
 use super::domain::Domain;
 use super::grid::{CenteredGrid, StaggeredGrid};
 use super::point_cloud::PointCloud;
@@ -259,6 +260,49 @@ pub(crate) fn composite_lattice_sample<B: Backend>(
         .linear_stencil(&points)?
         .gather(&values)?
         .into_primitive())
+}
+
+/// [`Backend::float_advect_points`] from tensor operations (the default of every backend;
+/// differentiable in the points and the velocity).
+pub(crate) fn composite_advect_points<B: Backend>(
+    lattices: &[SampleLattice],
+    components: &[B::Float],
+    points: B::Float,
+    dt: f32,
+    integrator: Integrator,
+) -> Result<B::Float> {
+    let points = Tensor::<B>::from_primitive(points);
+    let components: Vec<Tensor<B>> = components
+        .iter()
+        .map(|c| Tensor::from_primitive(c.clone()))
+        .collect();
+    let velocity = |at: &Tensor<B>| -> Result<Tensor<B>> {
+        let columns = lattices
+            .iter()
+            .zip(&components)
+            .map(|(lattice, values)| lattice.sample(values, at))
+            .collect::<Result<Vec<_>>>()?;
+        Tensor::concat(&columns, 1)
+    };
+    let moved = match integrator {
+        Integrator::Euler => &points + &(velocity(&points)? * dt),
+        Integrator::Rk4 => {
+            let k1 = velocity(&points)?;
+            let k2 = velocity(&(&points + &(&k1 * (0.5 * dt))))?;
+            let k3 = velocity(&(&points + &(&k2 * (0.5 * dt))))?;
+            let k4 = velocity(&(&points + &(&k3 * dt)))?;
+            let slope = (k1 + k4 + (k2 + k3) * 2.0) * (dt / 6.0);
+            &points + &slope
+        }
+    };
+    Ok(moved.into_primitive())
+}
+
+/// The lattices of the components of a staggered grid on `domain`.
+pub(crate) fn staggered_lattices(domain: &Domain) -> Vec<SampleLattice> {
+    (0..domain.dim())
+        .map(|axis| SampleLattice::of(domain, Some(axis)))
+        .collect()
 }
 
 /// [`Backend::float_lattice_splat`] from tensor operations (the default of every backend).

@@ -207,3 +207,53 @@ fn fused_extrapolation_matches_the_composite_bit_for_bit() {
         }
     }
 }
+
+#[test]
+fn fused_point_advection_matches_the_composite_bit_for_bit() {
+    use crate::Backend;
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+    for res in [vec![9], vec![7, 5], vec![4, 6, 5]] {
+        let domain = unit(&res);
+        let d = res.len();
+        let lattices = sample::staggered_lattices(&domain);
+        let components: Vec<_> = lattices
+            .iter()
+            .map(|lattice| {
+                let count: usize = lattice.shape.iter().product();
+                let values: Vec<f32> = (0..count).map(|_| rng.random_range(-3.0..3.0)).collect();
+                T::from_vec(values, &[count, 1], &device())
+                    .unwrap()
+                    .into_primitive()
+            })
+            .collect();
+        // Points inside, on the edges and beyond the domain (clamped).
+        let points: Vec<f32> = (0..40 * d)
+            .map(|k| rng.random_range(-1.0..res[k % d] as f32 + 1.0))
+            .collect();
+        let points = T::from_vec(points, &[40, d], &device()).unwrap();
+        for integrator in [Integrator::Euler, Integrator::Rk4] {
+            let fused = NdArray::float_advect_points(
+                &lattices,
+                &components,
+                points.primitive().clone(),
+                0.7,
+                integrator,
+            )
+            .unwrap();
+            let plain = sample::composite_advect_points::<NdArray>(
+                &lattices,
+                &components,
+                points.primitive().clone(),
+                0.7,
+                integrator,
+            )
+            .unwrap();
+            let bits = |t: &ndarray::ArcArray<f32, ndarray::IxDyn>| {
+                t.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+            };
+            assert_eq!(fused.shape(), plain.shape());
+            assert_eq!(bits(&fused), bits(&plain), "{res:?} {integrator:?}");
+        }
+    }
+}

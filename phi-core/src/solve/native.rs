@@ -25,7 +25,7 @@ pub(crate) enum CholeskyFactor {
     /// `P A Pᵀ = L Lᵀ` in the matrix's own elimination order (`order[k]`: the row eliminated
     /// `k`-th), through faer's symbolic and numeric factorizations with the identity ordering.
     Ordered {
-        symbolic: Box<SymbolicCholesky<usize>>,
+        symbolic: Arc<SymbolicCholesky<usize>>,
         values: Vec<f64>,
         order: Arc<[usize]>,
     },
@@ -341,13 +341,15 @@ fn ordered_cholesky(
     let (col_ptr, row_idx, values) = permuted_upper(matrix, &order);
     let pattern = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
     let upper = SparseColMatRef::new(pattern, &values);
-    let symbolic = factorize_symbolic_cholesky(
-        pattern,
-        Side::Upper,
-        SymmetricOrdering::Identity,
-        CholeskySymbolicParams::default(),
-    )
-    .map_err(|e| failed(format!("{e:?}")))?;
+    let symbolic = cached_symbolic(&col_ptr, &row_idx, || {
+        factorize_symbolic_cholesky(
+            pattern,
+            Side::Upper,
+            SymmetricOrdering::Identity,
+            CholeskySymbolicParams::default(),
+        )
+        .map_err(|e| failed(format!("{e:?}")))
+    })?;
     let par = cholesky_parallelism(n);
     let mut factor = vec![0.0; symbolic.len_val()];
     let mut scratch =
@@ -365,10 +367,53 @@ fn ordered_cholesky(
         )
         .map_err(|e| failed(format!("{e} (is the matrix positive definite?)")))?;
     Ok(CholeskyFactor::Ordered {
-        symbolic: Box::new(symbolic),
+        symbolic,
         values: factor,
         order,
     })
+}
+
+/// The symbolic factorization of the pattern `(col_ptr, row_idx)`, from this thread's cache of
+/// the most recent patterns or through `analyse`. A pressure solve on an unchanged liquid region
+/// (a pool at rest, a fixed domain) factorises matrices of one pattern again and again; for the
+/// small matrices of 2D grids the analysis (elimination tree, column counts, the factor's
+/// structure) costs about as much as the numeric factorization. The pattern is compared in full,
+/// so a hit is exact. Patterns of more than `LARGEST` entries are not kept (their analysis is a
+/// small part of the factorization, and the copies would be large).
+fn cached_symbolic(
+    col_ptr: &[usize],
+    row_idx: &[usize],
+    analyse: impl FnOnce() -> Result<SymbolicCholesky<usize>, SolveError>,
+) -> Result<Arc<SymbolicCholesky<usize>>, SolveError> {
+    /// Patterns kept per thread: a forward and an adjoint pattern, and a few regions in turn.
+    const KEPT: usize = 4;
+    const LARGEST: usize = 1 << 20;
+    if row_idx.len() > LARGEST {
+        return analyse().map(Arc::new);
+    }
+    type Entry = (Vec<usize>, Vec<usize>, Arc<SymbolicCholesky<usize>>);
+    thread_local! {
+        static RECENT: std::cell::RefCell<Vec<Entry>> = const { std::cell::RefCell::new(Vec::new()) };
+    }
+    let hit = RECENT.with_borrow_mut(|recent| {
+        let at = recent
+            .iter()
+            .position(|(c, r, _)| c.as_slice() == col_ptr && r.as_slice() == row_idx)?;
+        // Most recent first.
+        let entry = recent.remove(at);
+        let symbolic = entry.2.clone();
+        recent.insert(0, entry);
+        Some(symbolic)
+    });
+    if let Some(symbolic) = hit {
+        return Ok(symbolic);
+    }
+    let symbolic = Arc::new(analyse()?);
+    RECENT.with_borrow_mut(|recent| {
+        recent.insert(0, (col_ptr.to_vec(), row_idx.to_vec(), symbolic.clone()));
+        recent.truncate(KEPT);
+    });
+    Ok(symbolic)
 }
 
 /// The upper triangle of `P A Pᵀ` for a symmetric `A` as CSC arrays (column pointers, row

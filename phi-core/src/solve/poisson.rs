@@ -230,46 +230,61 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
         x
     }
 
+    // Per axis: the sides' boundary conditions, the coefficient, and the stride of the face
+    // array, walked alongside the cells (the lower face of a cell along `axis` has the cell's
+    // own multi-index in the face array of `axis`).
+    let open_side: Vec<[bool; 2]> = (0..d)
+        .map(|axis| domain.boundaries()[axis].map(|side| side == Boundary::Open))
+        .collect();
     let mut index = vec![0usize; d];
+    let mut lower_face = vec![0usize; d];
     // Per axis, the off-diagonal entries towards the lower and the upper neighbour.
     let mut lower: Vec<Option<(usize, f64)>> = vec![None; d];
     let mut upper: Vec<Option<(usize, f64)>> = vec![None; d];
-    for (u, &cell) in unknown_to_cell.iter().enumerate() {
-        let mut rest = cell;
-        for axis in 0..d {
-            index[axis] = rest / cell_strides[axis];
-            rest %= cell_strides[axis];
+    for cell in 0..cells {
+        if cell > 0 {
+            // Advance the multi-index (row-major) and the lower face of every axis with it.
+            let mut axis = d - 1;
+            loop {
+                index[axis] += 1;
+                for (a, face) in lower_face.iter_mut().enumerate() {
+                    *face += face_strides[a][axis];
+                }
+                if index[axis] < resolution[axis] || axis == 0 {
+                    break;
+                }
+                for (a, face) in lower_face.iter_mut().enumerate() {
+                    *face -= face_strides[a][axis] * resolution[axis];
+                }
+                index[axis] = 0;
+                axis -= 1;
+            }
         }
+        let Some(u) = cell_to_unknown[cell] else {
+            continue;
+        };
         let mut diagonal = 0.0;
         for axis in 0..d {
             let faces = face_open[axis].as_ref();
-            // The lower face of the cell along `axis` has the cell's own multi-index.
-            let lower_face: usize = (0..d).map(|a| index[a] * face_strides[axis][a]).sum();
-            for is_upper in [false, true] {
-                let slot = if is_upper {
-                    &mut upper[axis]
-                } else {
-                    &mut lower[axis]
-                };
+            let at_lower_side = index[axis] == 0;
+            let at_upper_side = index[axis] + 1 == resolution[axis];
+            for (is_upper, at_side, face, slot) in [
+                (false, at_lower_side, lower_face[axis], &mut lower[axis]),
+                (
+                    true,
+                    at_upper_side,
+                    lower_face[axis] + face_strides[axis][axis],
+                    &mut upper[axis],
+                ),
+            ] {
                 *slot = None;
-                let face = if is_upper {
-                    lower_face + face_strides[axis][axis]
-                } else {
-                    lower_face
-                };
                 let w = faces[face].weight();
                 if w <= 0.0 {
                     continue;
                 }
                 let coefficient = w * coefficients[axis];
-                let at_side = if is_upper {
-                    index[axis] + 1 == resolution[axis]
-                } else {
-                    index[axis] == 0
-                };
                 if at_side {
-                    let side = domain.boundaries()[axis][usize::from(is_upper)];
-                    if side == Boundary::Open {
+                    if open_side[axis][usize::from(is_upper)] {
                         diagonal += coefficient;
                         anchored[u] = true;
                     }
@@ -284,8 +299,13 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
                 match cell_to_unknown[neighbour] {
                     Some(v) => {
                         *slot = Some((v, -coefficient));
-                        let (a, b) = (find(&mut parent, u), find(&mut parent, v));
-                        parent[a] = b;
+                        // Each open face between unknowns is seen from both cells: join the
+                        // regions once, from the upper cell, under the smaller root (the first
+                        // unknown of a region stays its root, so paths stay short).
+                        if !is_upper {
+                            let (a, b) = (find(&mut parent, u), find(&mut parent, v));
+                            parent[a.max(b)] = a.min(b);
+                        }
                     }
                     None => anchored[u] = true,
                 }
