@@ -275,7 +275,8 @@ struct ObstacleMasks<B: Backend> {
 ///
 /// The step is thesis algorithm 1: particles → staggered grid; gravity; pressure projection on the
 /// cells that hold particles, with obstacles; particle velocities updated by FLIP (adding the
-/// grid's velocity change), PIC or a blend; the grid velocity extrapolated beyond the liquid;
+/// grid's velocity change), PIC, a blend or APIC (beyond the thesis: PIC with an affine velocity
+/// matrix per particle, [`FlipParams::apic`]); the grid velocity extrapolated beyond the liquid;
 /// particles advected by RK4 through it; particles pushed out of obstacles and back into the
 /// domain. Inflows emit before a step.
 ///
@@ -290,7 +291,8 @@ struct ObstacleMasks<B: Backend> {
 ///
 /// # What is differentiable
 /// The step is built from tensor operations: on an autodiff backend, gradients flow from any
-/// later particle state to earlier positions and velocities and, through
+/// later particle state to earlier positions and velocities (and APIC's affine matrices) and,
+/// through
 /// [`step_with`](Self::step_with) and [`SceneParameters`], to the gravity, each obstacle's offset
 /// (through the push `push(x − c) + c`: particles pushed onto an obstacle's surface move with it)
 /// and each inflow's velocity. The pressure solve is differentiated implicitly (one adjoint solve
@@ -307,7 +309,7 @@ struct ObstacleMasks<B: Backend> {
 /// - the clamp into the domain (zero gradient across a wall for a clamped coordinate).
 ///
 /// Finite differences agree with these gradients wherever a perturbation changes none of the
-/// above (`phi-flip/tests/flip/gradients.rs`).
+/// above (`phi-flip/tests/flip/gradients.rs`, and `apic.rs` for APIC).
 #[derive(Debug, Clone)]
 pub struct FlipSimulation<B: Backend> {
     domain: Domain,

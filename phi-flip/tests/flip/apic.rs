@@ -13,6 +13,12 @@ use phi_geom::{Geometry, Obstacle, Rotation};
 
 use super::{Nd, boxed, closed};
 
+/// A named affine field `u₀ + A x`: `(name, u₀, A)`.
+type AffineField = (&'static str, Vec<f32>, Vec<Vec<f32>>);
+
+/// One step's particles on the host: positions, velocities, affine matrices.
+type Frame = (Vec<f32>, Vec<f32>, Vec<f32>);
+
 /// `u(x) = u₀ + A x` at `points` (host, `[N * d]`).
 fn affine_field(points: &[f32], u0: &[f32], a: &[Vec<f32>]) -> Vec<f32> {
     let d = u0.len();
@@ -92,7 +98,7 @@ fn affine_round_trip_is_exact_with_apic_and_lossy_with_pic() {
     let n = positions.len() / 2;
     let points = Tensor::<Nd>::from_vec(positions.clone(), &[n, 2], &device).unwrap();
     let centre = [8.0, 8.0];
-    let fields: [(&str, Vec<f32>, Vec<Vec<f32>>); 2] = [
+    let fields: [AffineField; 2] = [
         // A rigid rotation about the block's centre, ω = 1.5 rad/s.
         (
             "rotation",
@@ -275,7 +281,7 @@ fn spinning_disc_keeps_its_angular_momentum_with_apic() {
 
 /// An APIC scene (a block thrown with a spin onto a rotated obstacle over a pool): its first
 /// steps on every backend.
-fn apic_run<B: Backend>(steps: usize) -> Vec<(Vec<f32>, Vec<f32>, Vec<f32>)> {
+fn apic_run<B: Backend>(steps: usize) -> Vec<Frame> {
     let obstacle = boxed(&[9.0, 6.0], &[13.0, 8.0])
         .rotated(Rotation::degrees(30.0))
         .unwrap();
@@ -338,8 +344,7 @@ fn apic_backends_agree_over_ten_steps() {
     let largest_c = reference[9].2.iter().fold(0.0f32, |m, c| m.max(c.abs()));
     println!("ndarray: particles moved up to {moved:.2} cells, |C| up to {largest_c:.2} /s");
     assert!(moved > 1.0 && largest_c > 1.0);
-    let mut others: Vec<(&str, Vec<(Vec<f32>, Vec<f32>, Vec<f32>)>)> =
-        vec![("burn", apic_run::<Burn>(10))];
+    let mut others: Vec<(&str, Vec<Frame>)> = vec![("burn", apic_run::<Burn>(10))];
     #[cfg(feature = "tch")]
     others.push(("tch", apic_run::<phi_core::backend::tch::Tch>(10)));
     for (name, frames) in others {
