@@ -35,6 +35,7 @@ fn forward_backward<B: AutodiffBackend>(
     let p = Particles {
         positions: x0.clone(),
         velocities: start.velocities.clone(),
+        affine: start.affine.clone(),
     };
     let end = forward(sim, &p);
     let loss = end.square().sum();

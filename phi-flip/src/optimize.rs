@@ -472,6 +472,7 @@ impl<B: AutodiffBackend> OptimizeProblem<B> {
         let start = Particles {
             positions: x0.clone(),
             velocities: self.initial.velocities.clone(),
+            affine: self.initial.affine.clone(),
         };
         let end = simulate(&self.simulation, &start, self.steps, None)?;
         let loss = self

@@ -12,7 +12,7 @@
 //! dt = 0.1
 //! steps = 100
 //! gravity = [0, -9.81]           # default: −9.81 along the last axis
-//! scheme = "flip"                # "flip" | "pic" | "blend" (with flip_ratio)
+//! scheme = "flip"                # "flip" | "pic" | "blend" (with flip_ratio) | "apic"
 //! transfer = "linear"            # "linear" (tent weights) | "nearest" (Φ_Flow's nearest face)
 //! particles_per_cell = 8
 //! placement = "jittered"         # "jittered" | "centered"
@@ -101,6 +101,9 @@ pub enum Scheme {
     Pic,
     /// `flip_ratio · FLIP + (1 − flip_ratio) · PIC`.
     Blend,
+    /// APIC (Jiang et al. 2015, beyond the thesis): PIC with an affine velocity matrix per
+    /// particle, which keeps rotations (angular momentum) that PIC damps.
+    Apic,
 }
 
 /// Particle → grid transfer.
@@ -139,7 +142,7 @@ pub struct SimulationSpec {
     /// The velocity update.
     #[serde(default)]
     pub scheme: Scheme,
-    /// The FLIP share of a `blend` (required for `blend`, not allowed otherwise).
+    /// The FLIP share of a `blend` (required for `blend`, not allowed otherwise, `apic` included).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub flip_ratio: Option<f32>,
     /// Particle → grid transfer.
@@ -341,6 +344,10 @@ impl Scene {
         params.flip_ratio = match (s.scheme, s.flip_ratio) {
             (Scheme::Flip, None) => 1.0,
             (Scheme::Pic, None) => 0.0,
+            (Scheme::Apic, None) => {
+                params.apic = true;
+                0.0
+            }
             (Scheme::Blend, Some(r)) => r,
             (Scheme::Blend, None) => {
                 return Err(error(
@@ -348,10 +355,16 @@ impl Scene {
                     "a blend needs a flip_ratio in [0, 1]".into(),
                 ));
             }
-            (_, Some(_)) => {
+            (scheme, Some(_)) => {
+                let name = match scheme {
+                    Scheme::Flip => "flip",
+                    Scheme::Pic => "pic",
+                    Scheme::Apic => "apic (a PIC update with affine matrices, no FLIP share)",
+                    Scheme::Blend => unreachable!("matched above"),
+                };
                 return Err(error(
                     "simulation.flip_ratio",
-                    "only allowed with scheme = \"blend\"".into(),
+                    format!("only allowed with scheme = \"blend\", not with {name}"),
                 ));
             }
         };

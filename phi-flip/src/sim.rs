@@ -3,8 +3,9 @@
 use phi_core::backend::Backend;
 use phi_core::fields::{
     CenteredGrid, Domain, Integrator, PointCloud, ProjectionMasks, StaggeredGrid, Transfer,
-    advect_points, extrapolate_valid, occupied_cells, particles_to_staggered, pressure_projection,
-    sample_staggered, valid_faces,
+    advect_points, extrapolate_valid, occupied_cells, particles_to_staggered,
+    particles_to_staggered_affine, pressure_projection, sample_staggered,
+    sample_staggered_gradient, valid_faces,
 };
 use phi_core::solve::{SolveOptions, SolveStats};
 use phi_core::{Tensor, TensorError};
@@ -21,8 +22,14 @@ pub struct FlipParams {
     /// Gravity per axis, in domain units per s² (the thesis: `(0, −9.81)` cells/s²).
     pub gravity: Vec<f32>,
     /// `1`: FLIP (particles add the grid's velocity change, thesis default); `0`: PIC (particles
-    /// take the grid's velocity); in between a blend `r · FLIP + (1 − r) · PIC`.
+    /// take the grid's velocity); in between a blend `r · FLIP + (1 − r) · PIC`. Must be `0`
+    /// with [`apic`](Self::apic).
     pub flip_ratio: f32,
+    /// APIC transfer (Jiang et al. 2015, beyond the thesis): particles carry an affine velocity
+    /// matrix `C` ([`Particles::affine`]) that the particle → grid transfer adds,
+    /// `v + C (x_face − x_p)`, and take the grid's velocity and its gradient back, so a
+    /// rotation survives the round trip. A PIC update: requires `flip_ratio = 0`.
+    pub apic: bool,
     /// Particle → grid transfer: tent weights (differentiable, the default) or Φ_Flow's
     /// nearest-face mean.
     pub transfer: Transfer,
@@ -49,6 +56,7 @@ impl FlipParams {
             dt,
             gravity,
             flip_ratio: 1.0,
+            apic: false,
             transfer: Transfer::Linear,
             solve: SolveOptions::default(),
             push_offset: 0.0,
@@ -74,6 +82,15 @@ impl FlipParams {
             return invalid(
                 "flip_ratio",
                 format!("must lie in [0, 1], got {}", self.flip_ratio),
+            );
+        }
+        if self.apic && self.flip_ratio != 0.0 {
+            return invalid(
+                "flip_ratio",
+                format!(
+                    "must be 0 with APIC (a PIC update with affine matrices), got {}",
+                    self.flip_ratio
+                ),
             );
         }
         if !(self.push_offset.is_finite() && self.push_offset >= 0.0) {
@@ -102,13 +119,18 @@ pub struct Inflow {
     pub particles_per_cell: usize,
 }
 
-/// The liquid: particle positions `[N, d]` and velocities `[N, d]`.
+/// The liquid: particle positions `[N, d]` and velocities `[N, d]`, and with APIC their affine
+/// velocity matrices `[N, d, d]`.
 #[derive(Debug, Clone)]
 pub struct Particles<B: Backend> {
     /// Positions in domain units.
     pub positions: Tensor<B>,
     /// Velocities in domain units per second.
     pub velocities: Tensor<B>,
+    /// APIC's affine matrices `[N, d, d]`: row `a` is the velocity gradient of component `a`
+    /// (`∂v_a/∂x_j` at `[p, a, j]`, per second). `None` stands for zero matrices: FLIP and PIC
+    /// steps neither read nor write it, an APIC step reads `None` as zero and always writes it.
+    pub affine: Option<Tensor<B>>,
 }
 
 impl<B: Backend> Particles<B> {
@@ -126,6 +148,48 @@ impl<B: Backend> Particles<B> {
         Ok(Self {
             positions: Tensor::from_vec(positions, &[n, dim], device)?,
             velocities: Tensor::from_vec(velocities, &[n, dim], device)?,
+            affine: None,
+        })
+    }
+
+    /// Particles at `positions [N, d]` moving at `velocities [N, d]`, without affine matrices.
+    pub fn new(positions: Tensor<B>, velocities: Tensor<B>) -> Self {
+        Self {
+            positions,
+            velocities,
+            affine: None,
+        }
+    }
+
+    /// The affine matrices `[N, d, d]`, zeros when there are none.
+    pub fn affine_or_zeros(&self) -> Tensor<B> {
+        match &self.affine {
+            Some(c) => c.clone(),
+            None => {
+                let shape = self.positions.shape();
+                let (n, d) = (shape[0], shape[1]);
+                Tensor::zeros(&[n, d, d], &self.positions.device())
+            }
+        }
+    }
+
+    /// These particles followed by `other`'s; affine matrices are kept when either has them
+    /// (zeros for the other).
+    ///
+    /// # Errors
+    /// When the dimensions differ.
+    pub fn concat(&self, other: &Self) -> Result<Self> {
+        let affine = match (&self.affine, &other.affine) {
+            (None, None) => None,
+            _ => Some(Tensor::concat(
+                &[self.affine_or_zeros(), other.affine_or_zeros()],
+                0,
+            )?),
+        };
+        Ok(Self {
+            positions: Tensor::concat(&[self.positions.clone(), other.positions.clone()], 0)?,
+            velocities: Tensor::concat(&[self.velocities.clone(), other.velocities.clone()], 0)?,
+            affine,
         })
     }
 
@@ -212,7 +276,8 @@ struct ObstacleMasks<B: Backend> {
 ///
 /// The step is thesis algorithm 1: particles → staggered grid; gravity; pressure projection on the
 /// cells that hold particles, with obstacles; particle velocities updated by FLIP (adding the
-/// grid's velocity change), PIC or a blend; the grid velocity extrapolated beyond the liquid;
+/// grid's velocity change), PIC, a blend or APIC (beyond the thesis: PIC with an affine velocity
+/// matrix per particle, [`FlipParams::apic`]); the grid velocity extrapolated beyond the liquid;
 /// particles advected by RK4 through it; particles pushed out of obstacles and back into the
 /// domain. Inflows emit before a step.
 ///
@@ -227,7 +292,8 @@ struct ObstacleMasks<B: Backend> {
 ///
 /// # What is differentiable
 /// The step is built from tensor operations: on an autodiff backend, gradients flow from any
-/// later particle state to earlier positions and velocities and, through
+/// later particle state to earlier positions and velocities (and APIC's affine matrices) and,
+/// through
 /// [`step_with`](Self::step_with) and [`SceneParameters`], to the gravity, each obstacle's offset
 /// (through the push `push(x − c) + c`: particles pushed onto an obstacle's surface move with it)
 /// and each inflow's velocity. The pressure solve is differentiated implicitly (one adjoint solve
@@ -244,7 +310,7 @@ struct ObstacleMasks<B: Backend> {
 /// - the clamp into the domain (zero gradient across a wall for a clamped coordinate).
 ///
 /// Finite differences agree with these gradients wherever a perturbation changes none of the
-/// above (`phi-flip/tests/flip/gradients.rs`).
+/// above (`phi-flip/tests/flip/gradients.rs`, and `apic.rs` for APIC).
 #[derive(Debug, Clone)]
 pub struct FlipSimulation<B: Backend> {
     domain: Domain,
@@ -581,14 +647,12 @@ impl<B: Backend> FlipSimulation<B> {
             let new = Particles {
                 velocities: new.velocities.zeros_like() + &scene.inflow_velocities[i],
                 positions: new.positions,
+                affine: None,
             };
             out = if out.is_empty() {
                 new
             } else {
-                Particles {
-                    positions: Tensor::concat(&[out.positions, new.positions], 0)?,
-                    velocities: Tensor::concat(&[out.velocities, new.velocities], 0)?,
-                }
+                out.concat(&new)?
             };
         }
         Ok(out)
@@ -629,9 +693,14 @@ impl<B: Backend> FlipSimulation<B> {
         let masks = self.masks_at(time, &offsets)?;
         let positions = &particles.positions;
 
-        // 1. Particles → grid.
+        // 1. Particles → grid; APIC adds each particle's affine velocity `C (x_face − x_p)`.
         let cloud = PointCloud::new(positions.clone(), particles.velocities.clone())?;
-        let (grid, weights) = particles_to_staggered(&cloud, domain, params.transfer)?;
+        let (grid, weights) = match &particles.affine {
+            Some(affine) if params.apic => {
+                particles_to_staggered_affine(&cloud, affine, domain, params.transfer)?
+            }
+            _ => particles_to_staggered(&cloud, domain, params.transfer)?,
+        };
         let valid = valid_faces(&weights)?;
 
         // 2. Forces.
@@ -654,8 +723,15 @@ impl<B: Backend> FlipSimulation<B> {
         let velocity = projection.velocity;
 
         // 4. Particle velocities: FLIP adds the change, PIC takes the new velocity; both read
-        //    values extrapolated one layer beyond the faces the particles reached.
-        let new_velocities = {
+        //    values extrapolated one layer beyond the faces the particles reached. APIC takes the
+        //    PIC velocity and, as the affine matrix, the gradient of the same interpolant.
+        let (new_velocities, new_affine) = if params.apic {
+            let (extended, _) = extrapolate_valid(&velocity, &valid, 1)?;
+            (
+                sample_staggered(&extended, positions)?,
+                Some(sample_staggered_gradient(&extended, positions)?),
+            )
+        } else {
             let r = params.flip_ratio;
             let mut result: Option<Tensor<B>> = None;
             if r > 0.0 {
@@ -672,7 +748,10 @@ impl<B: Backend> FlipSimulation<B> {
                     None => pic,
                 });
             }
-            result.expect("one of FLIP and PIC has a positive weight")
+            (
+                result.expect("one of FLIP and PIC has a positive weight"),
+                None,
+            )
         };
 
         // 5. Extrapolate the velocity beyond the liquid, far enough for this step's motion, and
@@ -740,6 +819,14 @@ impl<B: Backend> FlipSimulation<B> {
                 what: "particle velocities",
             });
         }
+        if let Some(c) = &new_affine
+            && c.to_vec().iter().any(|v| !v.is_finite())
+        {
+            return Err(FlipError::NonFinite {
+                step,
+                what: "particle affine matrices",
+            });
+        }
         let before = positions.to_vec();
         let max_displacement = host
             .chunks(domain.dim())
@@ -763,6 +850,7 @@ impl<B: Backend> FlipSimulation<B> {
             Particles {
                 positions: moved,
                 velocities: new_velocities,
+                affine: new_affine,
             },
             stats,
         ))

@@ -8,6 +8,8 @@ use phi_core::fields::{Boundary, Domain};
 use phi_flip::{FlipParams, FlipSimulation, Particles, Placement, Scene};
 use phi_geom::{Geometry, Obstacle, Rotation};
 
+#[path = "flip/apic.rs"]
+mod apic;
 #[path = "flip/gradients.rs"]
 mod gradients;
 #[path = "flip/optimize.rs"]

@@ -7,7 +7,8 @@
 //!   ([`staggered_to_centered`], [`centered_to_staggered`]), boundary conditions from the
 //!   [`Domain`] (see [`ops`]).
 //! - Sampling and particle ↔ grid transfer ([`sample_staggered`], [`sample_centered`],
-//!   [`particles_to_staggered`], [`particles_to_centered`]), masks ([`occupied_cells`],
+//!   [`particles_to_staggered`], [`particles_to_centered`]; APIC's affine transfer
+//!   [`particles_to_staggered_affine`] and [`sample_staggered_gradient`]), masks ([`occupied_cells`],
 //!   [`valid_faces`]), [`extrapolate_valid`] and advection ([`advect_semi_lagrangian`],
 //!   [`advect_points`]).
 //!
@@ -34,7 +35,8 @@ pub use point_cloud::PointCloud;
 pub use projection::{Projection, ProjectionMasks, pressure_projection};
 pub use sample::{
     SampleLattice, Transfer, count_particles, occupied_cells, particles_to_centered,
-    particles_to_staggered, sample_centered, sample_face_component, sample_staggered, valid_faces,
+    particles_to_staggered, particles_to_staggered_affine, sample_centered, sample_face_component,
+    sample_face_component_gradient, sample_staggered, sample_staggered_gradient, valid_faces,
 };
 
 #[cfg(all(test, feature = "ndarray"))]

@@ -532,3 +532,186 @@ pub fn occupied_cells<B: Backend>(points: &Tensor<B>, domain: &Domain) -> Result
 pub fn valid_faces<B: Backend>(weights: &StaggeredGrid<B>) -> Result<StaggeredGrid<B>> {
     weights.map(|_, w| Ok(w.greater_scalar(0.0)))
 }
+
+/// The gradient of the multilinear interpolant of one staggered component (or any tensor laid out
+/// on the faces of `axis`) at `points [N, d]`: `[N, d]`, column `j` = `∂u/∂x_j`.
+///
+/// This is `Σ_corners u_corner ∇w_corner(x)` for the stencil [`sample_face_component`] uses (the
+/// same lower corner, clamped indices): along axis `j` the difference of the interpolants on the
+/// two sample planes `j = base` and `j = base + 1` that enclose the point, divided by `Δx_j`. On
+/// the stencil's cell it is exact for a multilinear field, so a linear field `u(x) = u₀ + a·x`
+/// gives `a` everywhere, also within half a cell of the outermost samples where the value is
+/// clamped. Along an axis with a single sample it is 0. Differentiable in the component values
+/// and in the other coordinates of the points (the gradient of a multilinear interpolant does
+/// not depend on the coordinate it is taken along, within a cell).
+///
+/// # Errors
+/// [`TensorError::InvalidArgument`] when `points` is not `[N, d]` or the component is not of
+/// shape `domain.staggered_shape(axis)`.
+pub fn sample_face_component_gradient<B: Backend>(
+    component: &Tensor<B>,
+    domain: &Domain,
+    axis: usize,
+    points: &Tensor<B>,
+) -> Result<Tensor<B>> {
+    check_points("sample_face_component_gradient", domain, points)?;
+    let lattice = SampleLattice::of(domain, Some(axis));
+    if component.shape() != lattice.shape {
+        return Err(TensorError::InvalidArgument {
+            op: "sample_face_component_gradient",
+            shape: component.shape(),
+            reason: format!("component {axis} must have shape {:?}", lattice.shape),
+        });
+    }
+    let d = lattice.dim();
+    let n = points.shape()[0];
+    let device = points.device();
+    // The stencil's lower corner, as in `linear_stencil`, and its position.
+    let highest_base: Vec<f32> = lattice
+        .shape
+        .iter()
+        .map(|&s| s.saturating_sub(2) as f32)
+        .collect();
+    let highest_base = Tensor::from_vec(highest_base, &[1, d], &device)?;
+    let base = lattice
+        .continuous_indices(&points.detach())?
+        .floor()
+        .minimum(&highest_base)?;
+    let origin = Tensor::from_slice(&lattice.origin, &[1, d], &device)?;
+    let spacing = Tensor::from_slice(&lattice.spacing, &[1, d], &device)?;
+    let lower = base * &spacing + &origin;
+    let upper = &lower + &spacing;
+    // Per differentiated axis, the points moved onto the lower and the upper plane, all sampled
+    // in one call: `[2 · axes · N, d]`.
+    let axes: Vec<usize> = (0..d).filter(|&j| lattice.shape[j] > 1).collect();
+    if axes.is_empty() {
+        return Ok(Tensor::zeros(&[n, d], &device));
+    }
+    let mut moved = Vec::with_capacity(2 * axes.len());
+    for &j in &axes {
+        let mut one_hot = vec![0.0f32; d];
+        one_hot[j] = 1.0;
+        let one_hot = Tensor::from_vec(one_hot, &[1, d], &device)?;
+        let keep = 1.0 - &one_hot;
+        let kept = points * &keep;
+        moved.push(&kept + &(&lower * &one_hot));
+        moved.push(kept + &(&upper * &one_hot));
+    }
+    let moved = Tensor::concat(&moved, 0)?;
+    let flat = component.reshape(&[component.numel(), 1])?;
+    let planes = lattice
+        .sample(&flat, &moved)?
+        .reshape(&[axes.len(), 2, n])?;
+    let mut columns = Vec::with_capacity(d);
+    for j in 0..d {
+        columns.push(match axes.iter().position(|&k| k == j) {
+            Some(k) => {
+                let pair = planes.narrow(0, k..k + 1)?;
+                let difference = pair.narrow(1, 1..2)? - pair.narrow(1, 0..1)?;
+                (difference * (1.0 / lattice.spacing[j])).reshape(&[n, 1])?
+            }
+            None => Tensor::zeros(&[n, 1], &device),
+        });
+    }
+    Tensor::concat(&columns, 1)
+}
+
+/// The velocity gradient of a staggered field at `points [N, d]`: `[N, d, d]`, row `a` the
+/// gradient of component `a`'s multilinear interpolant ([`sample_face_component_gradient`]),
+/// `∂u_a/∂x_j` at `[p, a, j]`. This is APIC's affine matrix `C = B D⁻¹` for multilinear weights
+/// (Jiang et al. 2015).
+///
+/// # Errors
+/// [`TensorError::InvalidArgument`] when `points` is not `[N, d]`.
+pub fn sample_staggered_gradient<B: Backend>(
+    velocity: &StaggeredGrid<B>,
+    points: &Tensor<B>,
+) -> Result<Tensor<B>> {
+    let domain = velocity.domain();
+    check_points("sample_staggered_gradient", domain, points)?;
+    let d = domain.dim();
+    let n = points.shape()[0];
+    let rows = (0..d)
+        .map(|axis| {
+            sample_face_component_gradient(velocity.component(axis), domain, axis, points)?
+                .reshape(&[n, 1, d])
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Tensor::concat(&rows, 1)
+}
+
+/// The affine particle → grid transfer of APIC (Jiang et al. 2015): particle velocities
+/// `cloud.values() [N, d]` with affine matrices `affine [N, d, d]` (row `a` the velocity gradient
+/// of component `a`, as [`sample_staggered_gradient`] gives) at `cloud.positions() [N, d]`. Face
+/// `i` of component `a` receives `Σ w (v_a + c_a · (x_i − x_p)) / Σ w`, 0 where no particle
+/// reaches; `weights` as in [`particles_to_staggered`], which this equals for `affine = 0`.
+///
+/// `x_p` is the particle's position clamped onto the faces' lattice, the point the transfer
+/// weights and [`sample_staggered`] use, so that an affine field sampled by
+/// [`sample_staggered`] and [`sample_staggered_gradient`] comes back exactly on every face a
+/// particle reaches. The sums go through the backend's splat, with the extra channels
+/// `Σ w (v_a − c_a · (x_p − o))` and `Σ w c_a` (`o` the domain's centre, to keep the
+/// cancellation small) and `(x_i − o) · Σ w c_a` added on the grid. Differentiable like
+/// [`particles_to_staggered`], and in `affine`.
+///
+/// # Errors
+/// [`TensorError::InvalidArgument`] when the shapes do not fit the domain.
+pub fn particles_to_staggered_affine<B: Backend>(
+    cloud: &PointCloud<B>,
+    affine: &Tensor<B>,
+    domain: &Domain,
+    transfer: Transfer,
+) -> Result<(StaggeredGrid<B>, StaggeredGrid<B>)> {
+    let d = domain.dim();
+    let points = cloud.positions();
+    check_points("particles_to_staggered_affine", domain, points)?;
+    let n = points.shape()[0];
+    if cloud.channels() != d || affine.shape() != [n, d, d] {
+        return Err(TensorError::InvalidArgument {
+            op: "particles_to_staggered_affine",
+            shape: affine.shape(),
+            reason: format!(
+                "needs velocities [N, {d}] and affine matrices [N, {d}, {d}] for {n} particles, \
+                 got {:?} and {:?}",
+                cloud.values().shape(),
+                affine.shape()
+            ),
+        });
+    }
+    let device = points.device();
+    let centre: Vec<f32> = (0..d)
+        .map(|i| 0.5 * (domain.lower()[i] + domain.upper()[i]))
+        .collect();
+    let centre = Tensor::from_vec(centre, &[1, d], &device)?;
+    let mut values = Vec::with_capacity(d);
+    let mut weights = Vec::with_capacity(d);
+    for axis in 0..d {
+        let lattice = SampleLattice::of(domain, Some(axis));
+        let samples: usize = lattice.shape.iter().product();
+        let lowest = Tensor::from_slice(&lattice.origin, &[1, d], &device)?;
+        let highest: Vec<f32> = (0..d)
+            .map(|i| {
+                lattice.origin[i] + lattice.shape[i].saturating_sub(1) as f32 * lattice.spacing[i]
+            })
+            .collect();
+        let highest = Tensor::from_vec(highest, &[1, d], &device)?;
+        let relative = points.maximum(&lowest)?.minimum(&highest)? - &centre;
+        let c = affine.narrow(1, axis..axis + 1)?.reshape(&[n, d])?;
+        let v = cloud.values().narrow(1, axis..axis + 1)?;
+        let shifted = v - (&c * &relative).sum_axis(1)?.reshape(&[n, 1])?;
+        let channels = Tensor::concat(&[shifted, c], 1)?;
+        let (sums, weight_sums) = lattice.splat(points, &channels, transfer)?;
+        let faces =
+            super::grid::face_centers::<B>(domain, axis, &device).reshape(&[samples, d])? - &centre;
+        let sum = sums.narrow(1, 0..1)?
+            + (sums.narrow(1, 1..d + 1)? * &faces)
+                .sum_axis(1)?
+                .reshape(&[samples, 1])?;
+        values.push(normalise(&sum, &weight_sums).reshape(&lattice.shape)?);
+        weights.push(weight_sums.reshape(&lattice.shape)?);
+    }
+    Ok((
+        StaggeredGrid::new(values, domain.clone())?,
+        StaggeredGrid::new(weights, domain.clone())?,
+    ))
+}

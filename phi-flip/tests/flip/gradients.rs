@@ -167,6 +167,7 @@ fn loss<B: Backend>(sim: &FlipSimulation<B>, t: &[Tensor<B>], obstacles: usize) 
     let mut p = Particles {
         positions: t[0].clone(),
         velocities: t[1].clone(),
+        affine: None,
     };
     for step in 0..STEPS {
         p = sim.step_with(&p, step, &scene).unwrap().0;
