@@ -2,9 +2,11 @@
 //! gradient of a loss of the final positions with respect to the initial positions) of
 //! `scenes/small32.toml` (32², 1,024 particles, dt 0.05) on the autodiff backends.
 //!
-//! Before the timings, it prints the growth of the process' peak resident memory (`VmHWM`) over
-//! one forward pass and over one forward-plus-backward pass (the first measurement of each
-//! backend, so the peak is the pass' own).
+//! Before the timings, it prints each backend's memory: the peak resident memory (`VmHWM`) of
+//! one forward pass and of one forward-plus-backward pass above the resident memory before it
+//! (the peak is reset before each pass through `/proc/self/clear_refs`, so every number is the
+//! pass' own whatever ran before), and the resident memory after each of five more
+//! forward-plus-backward passes (memory that stays behind shows up as growth).
 //!
 //! `cargo bench --bench gradients --features tch -- --noplot`.
 
@@ -42,16 +44,73 @@ fn forward_backward<B: AutodiffBackend>(
     loss.gradients(&[&x0]).expect("gradients").remove(0)
 }
 
-/// The peak resident set size of this process in KiB (Linux `VmHWM`; 0 elsewhere).
-fn peak_rss_kib() -> u64 {
+/// A field of `/proc/self/status` in KiB (`VmHWM`: the peak resident set size, `VmRSS`: the
+/// current one; 0 off Linux).
+fn status_kib(field: &str) -> u64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
         .and_then(|s| {
             s.lines()
-                .find(|l| l.starts_with("VmHWM:"))
+                .find(|l| l.starts_with(field))
                 .and_then(|l| l.split_whitespace().nth(1)?.parse().ok())
         })
         .unwrap_or(0)
+}
+
+/// Resets the peak resident set size to the current one (Linux); false where it cannot.
+fn reset_peak() -> bool {
+    std::fs::write("/proc/self/clear_refs", "5").is_ok()
+}
+
+/// The peak resident memory of `pass` above `baseline` (KiB of resident memory before the
+/// backend's first pass), in MiB: the footprint of the pass, including memory the allocators
+/// kept from earlier passes and reuse.
+fn peak_of(baseline: u64, pass: impl FnOnce()) -> Option<f64> {
+    if !reset_peak() {
+        return None;
+    }
+    pass();
+    Some(status_kib("VmHWM:").saturating_sub(baseline) as f64 / 1024.0)
+}
+
+fn memory_report<B: AutodiffBackend>(sim: &FlipSimulation<B>, start: &Particles<B>) {
+    let baseline = status_kib("VmRSS:");
+    let forward_peak = peak_of(baseline, || common::force(&forward(sim, start)));
+    let backward_peak = peak_of(baseline, || common::force(&forward_backward(sim, start)));
+    let forward_resident: Vec<String> = (0..5)
+        .map(|_| {
+            common::force(&forward(sim, start));
+            format!(
+                "{:+.0}",
+                (status_kib("VmRSS:") as f64 - baseline as f64) / 1024.0
+            )
+        })
+        .collect();
+    println!(
+        "{}: resident after five forward passes: {} MiB",
+        B::name(),
+        forward_resident.join(", ")
+    );
+    let resident: Vec<String> = (0..5)
+        .map(|_| {
+            common::force(&forward_backward(sim, start));
+            format!(
+                "{:+.0}",
+                (status_kib("VmRSS:") as f64 - baseline as f64) / 1024.0
+            )
+        })
+        .collect();
+    match (forward_peak, backward_peak) {
+        (Some(f), Some(b)) => println!(
+            "{}: peak memory of a forward pass +{f:.1} MiB, of forward + backward +{b:.1} MiB \
+             (above the {:.0} MiB resident before); resident after five more forward + \
+             backward passes: {} MiB",
+            B::name(),
+            baseline as f64 / 1024.0,
+            resident.join(", ")
+        ),
+        _ => println!("{}: peak memory not measurable here", B::name()),
+    }
 }
 
 fn bench_backend<B: AutodiffBackend>(c: &mut Criterion) {
@@ -63,20 +122,9 @@ fn bench_backend<B: AutodiffBackend>(c: &mut Criterion) {
         .expect("the scene builds");
     let (sim, start) = (setup.simulation, setup.particles);
 
-    let before = peak_rss_kib();
-    common::force(&forward(&sim, &start));
-    let after_forward = peak_rss_kib();
-    common::force(&forward_backward(&sim, &start));
-    let after_backward = peak_rss_kib();
-    println!(
-        "{}: peak memory +{} MiB over the forward pass, +{} MiB more over forward + backward \
-         (peak {} MiB)",
-        B::name(),
-        (after_forward - before) / 1024,
-        (after_backward - after_forward) / 1024,
-        after_backward / 1024
-    );
+    memory_report(&sim, &start);
 
+    reset_peak();
     let mut group = c.benchmark_group("gradients small32 20 steps");
     group.sample_size(10);
     group.bench_with_input(BenchmarkId::new("forward", B::name()), &(), |b, _| {
@@ -88,6 +136,11 @@ fn bench_backend<B: AutodiffBackend>(c: &mut Criterion) {
         |b, _| b.iter(|| common::force(&forward_backward(&sim, &start))),
     );
     group.finish();
+    println!(
+        "{}: peak resident memory over the timing loops {:.0} MiB",
+        B::name(),
+        status_kib("VmHWM:") as f64 / 1024.0
+    );
 }
 
 fn benches(c: &mut Criterion) {
