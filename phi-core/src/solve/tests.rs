@@ -577,3 +577,51 @@ fn elimination_orders_must_be_permutations() {
     .unwrap();
     assert!(residual(&a, &x, &b) <= 1e-12 * norm(&b));
 }
+
+/// Matrices of one pattern share a symbolic analysis (cached per thread): the factorization of
+/// each must still be its own. Three systems of the same pattern with different values, factorised
+/// in turn and twice, each solved to the tolerance; a different pattern in between does not
+/// disturb them.
+#[test]
+fn ordered_factorizations_of_one_pattern_are_each_their_own() {
+    let base = pool_and_ball(&[24, 20]);
+    let scaled = |factor: f64, shift: f64| {
+        let m = &base.matrix;
+        let mut values = m.values().to_vec();
+        for row in 0..m.nrows() {
+            for k in m.row_ptr()[row]..m.row_ptr()[row + 1] {
+                values[k] *= factor;
+                if m.col_indices()[k] == row {
+                    values[k] += shift;
+                }
+            }
+        }
+        SparseMatrix::from_csr(
+            m.nrows(),
+            m.ncols(),
+            m.row_ptr().to_vec(),
+            m.col_indices().to_vec(),
+            values,
+        )
+        .unwrap()
+        .with_ordering(m.ordering().unwrap().to_vec())
+        .unwrap()
+    };
+    let options = SolveOptions::with_method(SolveMethod::Cholesky);
+    let b = random_vec(base.matrix.nrows(), 9);
+    let other = box_poisson(&[17, 9]);
+    for round in 0..2 {
+        for (factor, shift) in [(1.0, 0.0), (2.5, 0.0), (0.7, 3.0)] {
+            let a = scaled(factor, shift);
+            let (x, _) = solve(&a, &b, 1, &options).unwrap();
+            assert!(
+                residual(&a, &x, &b) <= 1e-9 * norm(&b),
+                "round {round}, ×{factor} + {shift}: residual {}",
+                residual(&a, &x, &b)
+            );
+            let c = random_vec(other.matrix.nrows(), 3);
+            let (y, _) = solve(&other.matrix, &c, 1, &options).unwrap();
+            assert!(residual(&other.matrix, &y, &c) <= 1e-9 * norm(&c));
+        }
+    }
+}
