@@ -517,6 +517,10 @@ impl Backend for NdArray {
             .map(|&m| if m != 0.0 { 1.0 } else { 0.0 })
             .collect();
         let grid = &shape[..spatial_dims];
+        if mask_channels == 1 {
+            extrapolate_frontier(&mut v, &mut mask, grid, channels, cells);
+            return Ok((from_vec(v, &shape), from_vec(mask, &mask_shape)));
+        }
         let mut sum = vec![0.0f32; sites * channels];
         let mut count = vec![0.0f32; sites * mask_channels];
         let mut scratch = Vec::new();
@@ -563,6 +567,145 @@ impl Backend for NdArray {
 }
 
 // -------------------------------------------------------------------- extrapolation kernel
+
+/// The extrapolation of [`Backend::float_extrapolate_valid`] for one mask per site, layer by
+/// layer over the frontier only: the invalid sites next to the valid region. Each frontier site
+/// takes its box sums in the order [`box_sum_in_place`] adds them over the whole grid (axis 0
+/// first, `(below + centre) + above`, zeros beyond the edges), so the values are bit for bit the
+/// composite's, at a cost that follows the frontier instead of the grid.
+fn extrapolate_frontier(
+    v: &mut [f32],
+    mask: &mut [f32],
+    grid: &[usize],
+    channels: usize,
+    cells: usize,
+) {
+    let d = grid.len();
+    let sites: usize = grid.iter().product();
+    if sites == 0 || cells == 0 {
+        return;
+    }
+    let mut strides = vec![1usize; d];
+    for axis in (0..d.saturating_sub(1)).rev() {
+        strides[axis] = strides[axis + 1] * grid[axis + 1];
+    }
+    let index_of = |site: usize, index: &mut [usize]| {
+        let mut rest = site;
+        for (i, &stride) in index.iter_mut().zip(&strides) {
+            *i = rest / stride;
+            rest %= stride;
+        }
+    };
+    // Every site of the 3^d box around `site` (itself included), within the grid.
+    fn for_each_in_box(
+        site: usize,
+        index: &[usize],
+        grid: &[usize],
+        strides: &[usize],
+        f: &mut impl FnMut(usize),
+    ) {
+        fn walk(
+            axis: usize,
+            site: usize,
+            index: &[usize],
+            grid: &[usize],
+            strides: &[usize],
+            f: &mut impl FnMut(usize),
+        ) {
+            if axis == grid.len() {
+                f(site);
+                return;
+            }
+            walk(axis + 1, site, index, grid, strides, f);
+            if index[axis] > 0 {
+                walk(axis + 1, site - strides[axis], index, grid, strides, f);
+            }
+            if index[axis] + 1 < grid[axis] {
+                walk(axis + 1, site + strides[axis], index, grid, strides, f);
+            }
+        }
+        walk(0, site, index, grid, strides, f);
+    }
+    // The box sum of `base` at `site` in box_sum_in_place's order: `level` axes summed so far.
+    fn box_at(
+        level: usize,
+        site: usize,
+        index: &[usize],
+        grid: &[usize],
+        strides: &[usize],
+        base: &impl Fn(usize) -> f32,
+    ) -> f32 {
+        if level == 0 {
+            return base(site);
+        }
+        let axis = level - 1;
+        let centre = box_at(level - 1, site, index, grid, strides, base);
+        let below = if index[axis] > 0 {
+            box_at(level - 1, site - strides[axis], index, grid, strides, base)
+        } else {
+            0.0
+        };
+        let above = if index[axis] + 1 < grid[axis] {
+            box_at(level - 1, site + strides[axis], index, grid, strides, base)
+        } else {
+            0.0
+        };
+        (below + centre) + above
+    }
+
+    let mut queued = vec![false; sites];
+    let mut index = vec![0usize; d];
+    let mut frontier = Vec::new();
+    let mut enqueue_neighbours =
+        |site: usize, mask: &[f32], queued: &mut [bool], out: &mut Vec<usize>| {
+            index_of(site, &mut index);
+            for_each_in_box(site, &index, grid, &strides, &mut |nb| {
+                if mask[nb] == 0.0 && !queued[nb] {
+                    queued[nb] = true;
+                    out.push(nb);
+                }
+            });
+        };
+    // The first frontier from one whole-grid box sum of the mask (row-wise, cheap): the invalid
+    // sites that see a valid one.
+    let mut near = mask.to_vec();
+    box_sum_in_place(&mut near, grid, 1, &mut Vec::new());
+    for (site, (&n, &m)) in near.iter().zip(mask.iter()).enumerate() {
+        if n > 0.0 && m == 0.0 {
+            queued[site] = true;
+            frontier.push(site);
+        }
+    }
+    let mut updates = Vec::new();
+    let mut at = vec![0usize; d];
+    for _ in 0..cells {
+        if frontier.is_empty() {
+            break;
+        }
+        updates.clear();
+        for &site in &frontier {
+            index_of(site, &mut at);
+            let count = box_at(d, site, &at, grid, &strides, &|s| mask[s]);
+            // A frontier site has a valid neighbour: count > 0, and the composite divides by
+            // `count + 0`.
+            for k in 0..channels {
+                let sum = box_at(d, site, &at, grid, &strides, &|s| {
+                    v[s * channels + k] * mask[s]
+                });
+                updates.push(sum / (count + 0.0));
+            }
+        }
+        for (&site, new) in frontier.iter().zip(updates.chunks_exact(channels)) {
+            v[site * channels..(site + 1) * channels].copy_from_slice(new);
+            mask[site] = 1.0;
+        }
+        let mut next = Vec::new();
+        for &site in &frontier {
+            enqueue_neighbours(site, mask, &mut queued, &mut next);
+        }
+        frontier = next;
+    }
+}
 
 /// Replaces `data` (`[grid..., channels]`, row-major) by its sum over the `3^d` box around each
 /// site (zero beyond the edges), one axis after the other, each as `(x[i−1] + x[i]) + x[i+1]`:

@@ -589,10 +589,14 @@ fn ordered_factorizations_of_one_pattern_are_each_their_own() {
         let m = &base.matrix;
         let mut values = m.values().to_vec();
         for row in 0..m.nrows() {
-            for k in m.row_ptr()[row]..m.row_ptr()[row + 1] {
-                values[k] *= factor;
-                if m.col_indices()[k] == row {
-                    values[k] += shift;
+            let entries = m.row_ptr()[row]..m.row_ptr()[row + 1];
+            for (value, &col) in values[entries.clone()]
+                .iter_mut()
+                .zip(&m.col_indices()[entries])
+            {
+                *value *= factor;
+                if col == row {
+                    *value += shift;
                 }
             }
         }
