@@ -1,7 +1,11 @@
-//! The fields layer per backend: pressure projection of a random velocity on a tank half full of
-//! liquid (32², 64², 128², 64³; the matrix is assembled and factorised in every call, as in a
-//! FLIP step, where the liquid moves), and particle → grid / grid → particle transfers with 10k
+//! The fields layer per backend: pressure projection of a random velocity on a tank about half
+//! full of liquid (32², 64², 128², 64³), and particle → grid / grid → particle transfers with 10k
 //! and 100k particles on a 64² grid.
+//!
+//! The projections cycle through eight liquid levels (the upper half of the tank less 0–7
+//! layers), so that, as in a FLIP step where the liquid moves, every call assembles, analyses and
+//! factorises a matrix of a new pattern. `… same mask` repeats one level: a liquid at rest, where
+//! the symbolic analysis of the previous call is reused.
 //!
 //! `cargo bench --bench fields --features tch -- --noplot` (add a filter such as `projection`).
 
@@ -38,10 +42,14 @@ fn bench_backend<B: Backend>(c: &mut Criterion) {
         let domain = domain(&res);
         let d = res.len();
         let top = res[d - 1] as f32 / 2.0;
-        let liquid = CenteredGrid::<B>::from_fn(&domain, 1, &device, |x| {
-            vec![if x[d - 1] < top { 1.0 } else { 0.0 }]
-        })
-        .expect("a mask");
+        let liquids: Vec<CenteredGrid<B>> = (0..8)
+            .map(|k| {
+                CenteredGrid::<B>::from_fn(&domain, 1, &device, |x| {
+                    vec![if x[d - 1] < top - k as f32 { 1.0 } else { 0.0 }]
+                })
+                .expect("a mask")
+            })
+            .collect();
         let velocity = StaggeredGrid::<B>::from_fn(&domain, &device, |axis, x| {
             ((axis as f32 + 1.0) * 0.37 * x.iter().sum::<f32>()).sin()
         })
@@ -62,13 +70,24 @@ fn bench_backend<B: Backend>(c: &mut Criterion) {
                 methods.push((" cholesky", SolveMethod::Cholesky));
             }
         }
+        if d == 2 {
+            methods.push((" same mask", SolveMethod::Auto));
+        }
         for (suffix, method) in methods {
             let options = SolveOptions::with_method(method);
             let id = BenchmarkId::new(format!("projection {label}{suffix}"), name);
+            let cycle = if suffix == " same mask" {
+                1
+            } else {
+                liquids.len()
+            };
+            let mut call = 0usize;
             c.bench_with_input(id, &(), |b, _| {
                 b.iter(|| {
+                    call += 1;
+                    let liquid = &liquids[call % cycle];
                     let p =
-                        pressure_projection(&velocity, ProjectionMasks::liquid(&liquid), &options)
+                        pressure_projection(&velocity, ProjectionMasks::liquid(liquid), &options)
                             .expect("the solve converges");
                     common::force(p.velocity.component(0))
                 })

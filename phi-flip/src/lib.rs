@@ -1,6 +1,6 @@
 //! The FLIP liquid simulator (thesis algorithm 1), written once against
 //! `phi_core::backend::Backend`: 2D and 3D, obstacles (any geometry, rotated, moving), inflows,
-//! FLIP, PIC or a blend, and scenes read from TOML files.
+//! FLIP, PIC, a blend or APIC, and scenes read from TOML files.
 
 mod error;
 pub mod loss;
