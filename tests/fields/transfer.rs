@@ -436,7 +436,7 @@ fn point_advection_integrates_a_linear_field<B: Backend>() {
                 );
                 // Euler and RK4 differ from the exact flow as their orders say.
                 let exact = f64::from(x) * z.exp();
-                let bound = 1.5 * f64::from(x).abs() * z.abs().powi(order as i32 + 1)
+                let bound = 1.5 * f64::from(x).abs() * z.abs().powi(order + 1)
                     / (1..=order + 1).product::<i32>() as f64;
                 assert!(
                     (f64::from(got) - exact).abs() <= bound + 2e-6,
