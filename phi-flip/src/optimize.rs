@@ -21,6 +21,7 @@
 //! learning_rate = 1.0
 //! loss = "l2"                   # "l2" | "sinkhorn" | "density"
 //! sinkhorn_epsilon = 1.0        # ε of the Sinkhorn divergence (domain units²)
+//! density_levels = 5            # grids of the density loss: cell sizes 1, 2, 4, … cells
 //! ```
 //!
 //! The target is seeded like the scene's liquid (its `particles_per_cell` and placement, seed
@@ -109,6 +110,10 @@ pub struct OptimizerSpec {
     /// `ε` of the Sinkhorn divergence, domain units² (default 1).
     #[serde(default = "default_epsilon")]
     pub sinkhorn_epsilon: f32,
+    /// Grids compared by the density loss: the domain's and each coarser by 2 (default 5:
+    /// cell sizes 1, 2, 4, 8 and 16 cells, as far as the resolution halves).
+    #[serde(default = "default_density_levels")]
+    pub density_levels: usize,
     /// Stop when the loss exceeds this many times the first iteration's (default 100): the
     /// optimisation diverged.
     #[serde(default = "default_divergence")]
@@ -124,6 +129,9 @@ fn default_learning_rate() -> f32 {
 fn default_epsilon() -> f32 {
     1.0
 }
+fn default_density_levels() -> usize {
+    5
+}
 fn default_divergence() -> f32 {
     100.0
 }
@@ -135,6 +143,7 @@ impl Default for OptimizerSpec {
             learning_rate: default_learning_rate(),
             loss: LossSpec::default(),
             sinkhorn_epsilon: default_epsilon(),
+            density_levels: default_density_levels(),
             divergence_factor: default_divergence(),
         }
     }
@@ -259,6 +268,12 @@ impl OptimizeConfig {
                 format!("must be positive and finite, got {}", o.sinkhorn_epsilon),
             ));
         }
+        if o.density_levels == 0 {
+            return Err(error(
+                "optimize.density_levels".into(),
+                "must be at least 1 (1: the domain's grid alone)".into(),
+            ));
+        }
         if !(o.divergence_factor.is_finite() && o.divergence_factor > 1.0) {
             return Err(error(
                 "optimize.divergence_factor".into(),
@@ -275,7 +290,9 @@ impl OptimizeConfig {
             LossSpec::Sinkhorn => Loss::Sinkhorn {
                 epsilon: self.optimize.sinkhorn_epsilon,
             },
-            LossSpec::Density => Loss::Density,
+            LossSpec::Density => Loss::Density {
+                levels: self.optimize.density_levels,
+            },
         }
     }
 
