@@ -77,29 +77,25 @@ fn memory_report<B: AutodiffBackend>(sim: &FlipSimulation<B>, start: &Particles<
     let baseline = status_kib("VmRSS:");
     let forward_peak = peak_of(baseline, || common::force(&forward(sim, start)));
     let backward_peak = peak_of(baseline, || common::force(&forward_backward(sim, start)));
-    let forward_resident: Vec<String> = (0..5)
-        .map(|_| {
-            common::force(&forward(sim, start));
-            format!(
-                "{:+.0}",
-                (status_kib("VmRSS:") as f64 - baseline as f64) / 1024.0
-            )
-        })
-        .collect();
+    // Resident memory above the baseline after each of five runs of `pass`.
+    let resident_after = |pass: &dyn Fn()| -> String {
+        (0..5)
+            .map(|_| {
+                pass();
+                format!(
+                    "{:+.0}",
+                    (status_kib("VmRSS:") as f64 - baseline as f64) / 1024.0
+                )
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
     println!(
         "{}: resident after five forward passes: {} MiB",
         B::name(),
-        forward_resident.join(", ")
+        resident_after(&|| common::force(&forward(sim, start)))
     );
-    let resident: Vec<String> = (0..5)
-        .map(|_| {
-            common::force(&forward_backward(sim, start));
-            format!(
-                "{:+.0}",
-                (status_kib("VmRSS:") as f64 - baseline as f64) / 1024.0
-            )
-        })
-        .collect();
+    let resident = resident_after(&|| common::force(&forward_backward(sim, start)));
     match (forward_peak, backward_peak) {
         (Some(f), Some(b)) => println!(
             "{}: peak memory of a forward pass +{f:.1} MiB, of forward + backward +{b:.1} MiB \
@@ -107,7 +103,7 @@ fn memory_report<B: AutodiffBackend>(sim: &FlipSimulation<B>, start: &Particles<
              backward passes: {} MiB",
             B::name(),
             baseline as f64 / 1024.0,
-            resident.join(", ")
+            resident
         ),
         _ => println!("{}: peak memory not measurable here", B::name()),
     }
