@@ -250,35 +250,7 @@ fn check_against_finite_differences<B: AutodiffBackend>(tiny: &Tiny) -> Vec<Vec<
             _ => NAMES[4],
         })
         .collect();
-    let (mut compared, mut total) = (0, 0);
-    for k in 0..analytic.len() {
-        for e in 0..analytic[k].len() {
-            total += 1;
-            let (a, f, f2) = (analytic[k][e], fd[k][e], fd_half[k][e]);
-            // A kink inside the stencil: the two difference quotients disagree.
-            if (f - f2).abs() > 1e-2 + 1e-2 * f.abs() {
-                continue;
-            }
-            compared += 1;
-            assert!(
-                (a - f).abs() <= 2e-2 + 2e-2 * f.abs(),
-                "∂L/∂{}[{e}]: backprop {a}, finite differences {f} (h/2: {f2})",
-                names[k]
-            );
-        }
-    }
-    println!("{compared} of {total} gradient elements compared with finite differences");
-    assert!(
-        compared * 5 >= total * 4,
-        "only {compared} of {total} elements lie on a smooth piece"
-    );
-    for (k, g) in analytic.iter().enumerate() {
-        assert!(
-            g.iter().any(|v| v.abs() > 1e-2),
-            "the gradient with respect to {} vanishes: {g:?}",
-            names[k]
-        );
-    }
+    compare_with_finite_differences("", &analytic, &fd, &fd_half, &names);
     analytic
 }
 
@@ -427,5 +399,47 @@ fn sinkhorn_and_l2_gradients_match_finite_differences<B: AutodiffBackend>() {
                 g[e]
             );
         }
+    }
+}
+
+/// Backprop gradients `analytic[k]` (one list per input, named `names[k]`) against central
+/// finite differences with steps `h` (`fd`) and `h/2` (`fd_half`): an element is compared only
+/// where the two difference quotients agree (no kink inside the stencil), to 2e-2 absolute plus
+/// 2e-2 relative; at least 80 % of the elements must qualify, and no gradient may vanish.
+pub(crate) fn compare_with_finite_differences<S: AsRef<str>>(
+    label: &str,
+    analytic: &[Vec<f32>],
+    fd: &[Vec<f32>],
+    fd_half: &[Vec<f32>],
+    names: &[S],
+) {
+    let (mut compared, mut total) = (0, 0);
+    for k in 0..analytic.len() {
+        for e in 0..analytic[k].len() {
+            total += 1;
+            let (a, f, f2) = (analytic[k][e], fd[k][e], fd_half[k][e]);
+            // A kink inside the stencil: the two difference quotients disagree.
+            if (f - f2).abs() > 1e-2 + 1e-2 * f.abs() {
+                continue;
+            }
+            compared += 1;
+            assert!(
+                (a - f).abs() <= 2e-2 + 2e-2 * f.abs(),
+                "{label}∂L/∂{}[{e}]: backprop {a}, finite differences {f} (h/2: {f2})",
+                names[k].as_ref()
+            );
+        }
+    }
+    println!("{label}{compared} of {total} gradient elements compared with finite differences");
+    assert!(
+        compared * 5 >= total * 4,
+        "{label}only {compared} of {total} elements lie on a smooth piece"
+    );
+    for (k, g) in analytic.iter().enumerate() {
+        assert!(
+            g.iter().any(|v| v.abs() > 1e-2),
+            "{label}the gradient with respect to {} vanishes: {g:?}",
+            names[k].as_ref()
+        );
     }
 }
