@@ -3,7 +3,7 @@
 use phi_core::backend::Backend;
 use phi_core::fields::{
     CenteredGrid, Domain, Integrator, PointCloud, ProjectionMasks, StaggeredGrid, Transfer,
-    advect_points, extrapolate_valid, occupied_cells, particles_to_staggered,
+    advect_points, extrapolate_valid, occupied_cells_from_host, particles_to_staggered,
     particles_to_staggered_affine, pressure_projection, sample_staggered,
     sample_staggered_gradient, valid_faces,
 };
@@ -708,7 +708,9 @@ impl<B: Backend> FlipSimulation<B> {
             grid.map(|axis, c| Ok(c + &(scene.gravity.narrow(0, axis..axis + 1)? * dt)))?;
 
         // 3. Pressure projection on the cells holding particles, obstacles blocking their faces.
-        let occupied = occupied_cells(&positions.detach(), domain)?;
+        // Read back once: the occupancy mask and, at the end, the step's largest displacement.
+        let before = positions.to_vec();
+        let occupied = occupied_cells_from_host(&before, domain, &self.device)?;
         let liquid = occupied.with_values(occupied.values() * &(1.0 - masks.solid.values()))?;
         let projection = pressure_projection(
             &forced,
@@ -827,14 +829,14 @@ impl<B: Backend> FlipSimulation<B> {
                 what: "particle affine matrices",
             });
         }
-        let before = positions.to_vec();
+        let dx = domain.cell_size();
         let max_displacement = host
             .chunks(domain.dim())
             .zip(before.chunks(domain.dim()))
             .map(|(a, b)| {
                 a.iter()
                     .zip(b)
-                    .zip(domain.cell_size())
+                    .zip(&dx)
                     .map(|((x, y), h)| ((x - y) / h).powi(2))
                     .sum::<f32>()
                     .sqrt()

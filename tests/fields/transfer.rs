@@ -2,8 +2,8 @@
 
 use phi_core::fields::{
     Boundary, CenteredGrid, Domain, Integrator, PointCloud, StaggeredGrid, Transfer, advect_points,
-    extrapolate_valid, occupied_cells, particles_to_centered, particles_to_staggered,
-    sample_centered, sample_staggered, valid_faces,
+    count_particles, extrapolate_valid, occupied_cells, particles_to_centered,
+    particles_to_staggered, sample_centered, sample_staggered, valid_faces,
 };
 use phi_core::{Backend, Tensor};
 
@@ -14,6 +14,7 @@ crate::conformance::for_each_backend!(
     particle_grid_particle_reproduces_linear_fields,
     transfer_conserves_weights,
     particles_to_centered_density,
+    occupied_cells_match_particle_counts,
     extrapolation_fills_exactly_the_requested_layers,
     point_advection_integrates_a_linear_field,
 );
@@ -283,6 +284,57 @@ fn particles_to_centered_density<B: Backend>() {
 }
 
 /// Host reference of one extrapolation step on a 2-d array (`3×3` box).
+/// The host-side occupancy mask marks exactly the cells that `count_particles` (tensor operations)
+/// counts, also for points on cell sides, on the domain's sides and outside it, in 2D and 3D.
+fn occupied_cells_match_particle_counts<B: Backend>() {
+    let cases = [
+        domain(&[7, 5], &[-1.0, 0.5], &[2.5, 3.0], Boundary::Closed),
+        domain(
+            &[4, 3, 5],
+            &[0.0, -2.0, 1.0],
+            &[1.0, 1.0, 3.5],
+            Boundary::Closed,
+        ),
+    ];
+    for domain in cases {
+        let d = domain.dim();
+        let dx = domain.cell_size();
+        let mut points = Vec::new();
+        // Cell sides and centres on a half-cell lattice reaching one cell beyond the domain.
+        let shape: Vec<usize> = domain.resolution().iter().map(|&n| 2 * n + 5).collect();
+        for_each_index(&shape, |index, _| {
+            for j in 0..d {
+                points.push(domain.lower()[j] + (index[j] as f32 - 2.0) * 0.5 * dx[j]);
+            }
+        });
+        // And scattered ones.
+        let mut state = 0x2545_f491_u32;
+        for _ in 0..500 {
+            for j in 0..d {
+                state ^= state << 13;
+                state ^= state >> 17;
+                state ^= state << 5;
+                let u = state as f32 / u32::MAX as f32;
+                let span = domain.upper()[j] - domain.lower()[j];
+                points.push(domain.lower()[j] - 0.1 * span + 1.2 * span * u);
+            }
+        }
+        // A few points at a time, so that most cells stay empty and every point's cell counts.
+        for group in points.chunks(5 * d) {
+            let group = tensor::<B>(&[group.len() / d, d], group);
+            let counts = count_particles(&group, &domain).unwrap().values().clone();
+            let occupied = occupied_cells(&group, &domain).unwrap().values().clone();
+            assert_eq!(occupied.shape(), counts.shape());
+            let want: Vec<f32> = counts
+                .to_vec()
+                .iter()
+                .map(|&c| f32::from(c > 0.0))
+                .collect();
+            assert_eq!(occupied.to_vec(), want, "points {:?}", group.to_vec());
+        }
+    }
+}
+
 fn host_extrapolate(values: &[f32], valid: &[f32], shape: [usize; 2]) -> (Vec<f32>, Vec<f32>) {
     let (mut out, mut mask) = (values.to_vec(), valid.to_vec());
     for i in 0..shape[0] {

@@ -34,9 +34,10 @@ pub use ops::{
 pub use point_cloud::PointCloud;
 pub use projection::{Projection, ProjectionMasks, pressure_projection};
 pub use sample::{
-    SampleLattice, Transfer, count_particles, occupied_cells, particles_to_centered,
-    particles_to_staggered, particles_to_staggered_affine, sample_centered, sample_face_component,
-    sample_face_component_gradient, sample_staggered, sample_staggered_gradient, valid_faces,
+    SampleLattice, Transfer, count_particles, occupied_cells, occupied_cells_from_host,
+    particles_to_centered, particles_to_staggered, particles_to_staggered_affine, sample_centered,
+    sample_face_component, sample_face_component_gradient, sample_staggered,
+    sample_staggered_gradient, valid_faces,
 };
 
 #[cfg(all(test, feature = "ndarray"))]

@@ -520,8 +520,52 @@ pub fn count_particles<B: Backend>(points: &Tensor<B>, domain: &Domain) -> Resul
 /// # Errors
 /// [`TensorError::InvalidArgument`] when `points` is not `[N, d]`.
 pub fn occupied_cells<B: Backend>(points: &Tensor<B>, domain: &Domain) -> Result<CenteredGrid<B>> {
-    let counts = count_particles(points, domain)?;
-    counts.with_values(counts.values().greater_scalar(0.0))
+    check_points("occupied_cells", domain, points)?;
+    occupied_cells_from_host(&points.to_vec(), domain, &points.device())
+}
+
+/// [`occupied_cells`] of points already on the host, `points` row-major `[N, d]`, as a mask on
+/// `device`. Marks the same cells as [`count_particles`] counts: the nearest cell centre, with the
+/// same single-precision arithmetic, so both agree on points on a cell's side.
+///
+/// # Errors
+/// [`TensorError::InvalidArgument`] when the length of `points` is not a multiple of `d`.
+pub fn occupied_cells_from_host<B: Backend>(
+    points: &[f32],
+    domain: &Domain,
+    device: &B::Device,
+) -> Result<CenteredGrid<B>> {
+    let lattice = SampleLattice::of(domain, None);
+    let d = lattice.dim();
+    if !points.len().is_multiple_of(d) {
+        return Err(TensorError::InvalidArgument {
+            op: "occupied_cells_from_host",
+            shape: vec![points.len()],
+            reason: format!(
+                "{} values are not a whole number of {d}-d points",
+                points.len()
+            ),
+        });
+    }
+    let inverse: Vec<f32> = lattice.spacing.iter().map(|s| 1.0 / s).collect();
+    let upper: Vec<f32> = lattice.shape.iter().map(|&s| (s - 1) as f32).collect();
+    let strides = lattice.strides();
+    let mut mask = vec![0.0f32; domain.cell_count()];
+    for point in points.chunks_exact(d) {
+        let mut flat = 0usize;
+        for axis in 0..d {
+            // As `continuous_indices` and `nearest_stencil`: clamp, round half up, clamp.
+            let index = ((point[axis] - lattice.origin[axis]) * inverse[axis])
+                .max(0.0)
+                .min(upper[axis]);
+            let nearest = (index + 0.5).floor().min(upper[axis]);
+            flat += nearest as usize * strides[axis] as usize;
+        }
+        mask[flat] = 1.0;
+    }
+    let mut shape = domain.resolution().to_vec();
+    shape.push(1);
+    CenteredGrid::new(Tensor::from_vec(mask, &shape, device)?, domain.clone())
 }
 
 /// The faces whose transfer weight is positive (the `weights` of [`particles_to_staggered`]), as
