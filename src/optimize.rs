@@ -159,7 +159,8 @@ pub struct OptimizeSummary {
     pub iterations: usize,
     /// The loss per iteration.
     pub losses: Vec<f32>,
-    /// The first iteration whose loss is within 1% of the lowest (the convergence point).
+    /// The first iteration whose loss is within 1% of the lowest, or within round-off of it
+    /// (see [`convergence_iteration`]): the convergence point.
     pub converged_at: usize,
     /// Chamfer distance of the simulated liquid to the target, first and last iteration.
     pub chamfer: [f32; 2],
@@ -277,11 +278,7 @@ pub fn optimize<B: AutodiffBackend>(
     };
     let distances = |r: &IterationRecord| set_distances(&r.final_positions, &target, d);
     let (before, after) = (distances(first)?, distances(last)?);
-    let lowest = losses.iter().copied().fold(f32::INFINITY, f32::min);
-    let converged_at = losses
-        .iter()
-        .position(|&l| l <= lowest + 0.01 * lowest.abs())
-        .unwrap_or(0);
+    let converged_at = convergence_iteration(&losses);
     let summary = OptimizeSummary {
         backend: B::name().to_string(),
         loss: problem.loss.name().into(),
@@ -409,5 +406,41 @@ fn line(image: &mut RgbImage, a: (i64, i64), b: (i64, i64), color: [u8; 3]) {
             err += dx;
             y += sy;
         }
+    }
+}
+
+/// The first iteration from which the loss stays within 1% of the lowest, where "within" also
+/// accepts a difference below `1e-6` of the largest loss: a loss that reaches single-precision
+/// round-off (an exact match gives values like `1e-11`, then `3e-13`) has converged when it first
+/// gets there, not when it hits its smallest round-off value. 0 for no losses.
+pub fn convergence_iteration(losses: &[f32]) -> usize {
+    let finite = || losses.iter().copied().filter(|l| l.is_finite());
+    let lowest = finite().fold(f32::INFINITY, f32::min);
+    let largest = finite().map(f32::abs).fold(0.0, f32::max);
+    let tolerance = (0.01 * lowest.abs()).max(1e-6 * largest);
+    let close = |l: f32| l <= lowest + tolerance;
+    // The last iteration that is not close, plus one: close from there on.
+    losses
+        .iter()
+        .rposition(|&l| !close(l))
+        .map_or(0, |i| (i + 1).min(losses.len().saturating_sub(1)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::convergence_iteration;
+
+    #[test]
+    fn convergence_is_where_the_loss_stays_close_to_its_lowest() {
+        // A rise, then a fall to round-off zero: converged at the first round-off value.
+        let losses = [13_810.0, 17_058.0, 7_151.0, 1_323.0, 0.5, 1e-11, 3e-13, 2e-12];
+        assert_eq!(convergence_iteration(&losses), 5);
+        // Within 1% of a positive lowest value, and only once it stays there.
+        let losses = [10.0, 5.0, 1.005, 3.0, 1.009, 1.0, 1.004];
+        assert_eq!(convergence_iteration(&losses), 4);
+        // Still falling at the end: the last iteration.
+        assert_eq!(convergence_iteration(&[4.0, 3.0, 2.0]), 2);
+        assert_eq!(convergence_iteration(&[]), 0);
+        assert_eq!(convergence_iteration(&[7.0]), 0);
     }
 }

@@ -555,11 +555,12 @@ pub fn occupied_cells_from_host<B: Backend>(
         let mut flat = 0usize;
         for axis in 0..d {
             // As `continuous_indices` and `nearest_stencil`: clamp, round half up, clamp.
+            // `max` also maps NaN to 0. The index is then ≥ 0, so truncation is `floor`.
             let index = ((point[axis] - lattice.origin[axis]) * inverse[axis])
                 .max(0.0)
                 .min(upper[axis]);
-            let nearest = (index + 0.5).floor().min(upper[axis]);
-            flat += nearest as usize * strides[axis] as usize;
+            let nearest = ((index + 0.5) as usize).min(lattice.shape[axis] - 1);
+            flat += nearest * strides[axis] as usize;
         }
         mask[flat] = 1.0;
     }
