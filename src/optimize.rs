@@ -433,7 +433,9 @@ mod tests {
     #[test]
     fn convergence_is_where_the_loss_stays_close_to_its_lowest() {
         // A rise, then a fall to round-off zero: converged at the first round-off value.
-        let losses = [13_810.0, 17_058.0, 7_151.0, 1_323.0, 0.5, 1e-11, 3e-13, 2e-12];
+        let losses = [
+            13_810.0, 17_058.0, 7_151.0, 1_323.0, 0.5, 1e-11, 3e-13, 2e-12,
+        ];
         assert_eq!(convergence_iteration(&losses), 5);
         // Within 1% of a positive lowest value, and only once it stays there.
         let losses = [10.0, 5.0, 1.005, 3.0, 1.009, 1.0, 1.004];

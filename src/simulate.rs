@@ -5,7 +5,9 @@
 //!   state; with inflows, `N` is the final particle count and rows of particles that do not exist
 //!   yet are NaN), `particle_type [N]` int32 (1 = liquid), `particle_count [T+1]` int32, `time
 //!   [T+1]` float32, `steps_completed [1]` int64. It is rewritten (atomically) every
-//!   `checkpoint_every` steps, so a killed run leaves the steps done so far.
+//!   `checkpoint_every` steps, so a killed run leaves the steps done so far. An APIC scene adds
+//!   `affine` `[T+1, N, d, d]` float32, each particle's affine velocity matrix (`[.., a, j]` =
+//!   `∂v_a/∂x_j`, per second; zero in frame 0).
 //! - `run.json`: the scene, the backend, and run facts; `"complete": false` until the last step
 //!   is written.
 //! - `frames/frame_NNNNN.png` and `simulation.gif` (written frame by frame).
@@ -122,9 +124,14 @@ pub fn simulate<B: Backend>(scene: &Scene, options: &SimulateOptions) -> Result<
         ..FrameStyle::default()
     };
     let mut gif: Option<GifWriter> = None;
-    let mut history: Vec<(Vec<f32>, Vec<f32>)> = Vec::with_capacity(steps + 1);
+    let mut history: Vec<Frame> = Vec::with_capacity(steps + 1);
     let mut particles: Particles<B> = setup.particles;
-    let record = |p: &Particles<B>| (p.positions.to_vec(), p.velocities.to_vec());
+    let apic = sim.params().apic;
+    let record = |p: &Particles<B>| Frame {
+        positions: p.positions.to_vec(),
+        velocities: p.velocities.to_vec(),
+        affine: apic.then(|| p.affine_or_zeros().to_vec()),
+    };
     history.push(record(&particles));
 
     let bar = if options.progress {
@@ -182,7 +189,7 @@ pub fn simulate<B: Backend>(scene: &Scene, options: &SimulateOptions) -> Result<
         Ok(())
     };
     if options.frame_every > 0 {
-        render(0, &history[0].0, &mut gif, &mut summary.frames)?;
+        render(0, &history[0].positions, &mut gif, &mut summary.frames)?;
     }
 
     for step in 0..steps {
@@ -204,7 +211,7 @@ pub fn simulate<B: Backend>(scene: &Scene, options: &SimulateOptions) -> Result<
         if options.frame_every > 0 && (step + 1) % options.frame_every == 0 {
             render(
                 step + 1,
-                &history[step + 1].0,
+                &history[step + 1].positions,
                 &mut gif,
                 &mut summary.frames,
             )?;
@@ -256,20 +263,41 @@ fn write_run_file(
     Ok(())
 }
 
+/// One recorded state: positions and velocities `[N * d]`, with APIC the affine matrices
+/// `[N * d * d]`.
+struct Frame {
+    positions: Vec<f32>,
+    velocities: Vec<f32>,
+    affine: Option<Vec<f32>>,
+}
+
 /// The trajectory so far as `trajectory.npz` (see the module docs).
-fn write_trajectory(out: &Path, history: &[(Vec<f32>, Vec<f32>)], d: usize, dt: f32) -> Result<()> {
+fn write_trajectory(out: &Path, history: &[Frame], d: usize, dt: f32) -> Result<()> {
     let frames = history.len();
-    let n = history.iter().map(|(p, _)| p.len() / d).max().unwrap_or(0);
+    let n = history
+        .iter()
+        .map(|f| f.positions.len() / d)
+        .max()
+        .unwrap_or(0);
     let mut positions = vec![f32::NAN; frames * n * d];
     let mut velocities = vec![f32::NAN; frames * n * d];
+    let mut affine = history
+        .iter()
+        .any(|f| f.affine.is_some())
+        .then(|| vec![f32::NAN; frames * n * d * d]);
     let mut counts = Vec::with_capacity(frames);
-    for (t, (p, v)) in history.iter().enumerate() {
+    for (t, frame) in history.iter().enumerate() {
+        let (p, v) = (&frame.positions, &frame.velocities);
         positions[t * n * d..t * n * d + p.len()].copy_from_slice(p);
         velocities[t * n * d..t * n * d + v.len()].copy_from_slice(v);
+        if let (Some(all), Some(c)) = (affine.as_mut(), &frame.affine) {
+            let start = t * n * d * d;
+            all[start..start + c.len()].copy_from_slice(c);
+        }
         counts.push((p.len() / d) as i32);
     }
     let time: Vec<f32> = (0..frames).map(|t| t as f32 * dt).collect();
-    let arrays = [
+    let mut arrays = vec![
         (
             "positions",
             NpyArray::new(vec![frames, n, d], ArrayData::F32(positions))?,
@@ -292,6 +320,12 @@ fn write_trajectory(out: &Path, history: &[(Vec<f32>, Vec<f32>)], d: usize, dt: 
             NpyArray::new(vec![1], ArrayData::I64(vec![frames as i64 - 1]))?,
         ),
     ];
+    if let Some(affine) = affine {
+        arrays.push((
+            "affine",
+            NpyArray::new(vec![frames, n, d, d], ArrayData::F32(affine))?,
+        ));
+    }
     let refs: Vec<(&str, &NpyArray)> = arrays.iter().map(|(k, a)| (*k, a)).collect();
     write_npz(out.join("trajectory.npz"), &refs)?;
     Ok(())

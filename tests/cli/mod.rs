@@ -55,6 +55,10 @@ fn simulate_writes_trajectory_frames_and_gif() {
     assert_eq!(get("positions").shape, vec![7, 1024, 2]);
     assert_eq!(get("velocities").shape, vec![7, 1024, 2]);
     assert_eq!(get("steps_completed").as_i64().unwrap(), &[6]);
+    assert!(
+        arrays.iter().all(|(k, _)| k != "affine"),
+        "a FLIP run has no affine matrices"
+    );
     let positions = get("positions");
     let p = positions.as_f32().unwrap();
     assert!(p.iter().all(|x| x.is_finite() && (0.0..=32.0).contains(x)));
@@ -67,6 +71,54 @@ fn simulate_writes_trajectory_frames_and_gif() {
         serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
     assert_eq!(run["complete"], true);
     assert_eq!(run["steps"], 6);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn simulate_records_apic_affine_matrices() {
+    let dir = scratch("apic");
+    let scene = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/scenes/colliding_blocks_apic.toml"
+    );
+    let out = dir.join("run");
+    let output = phi()
+        .args(["simulate", scene, "--out"])
+        .arg(&out)
+        .args(["--steps", "30", "--frame-every", "0"])
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let arrays = read_npz(out.join("trajectory.npz")).unwrap();
+    let get = |k: &str| arrays.iter().find(|(n, _)| n == k).map(|(_, a)| a.clone());
+    let n = get("positions").unwrap().shape[1];
+    let affine = get("affine").expect("an APIC run records the affine matrices");
+    assert_eq!(affine.shape, vec![31, n, 2, 2]);
+    let c = affine.as_f32().unwrap();
+    let largest = |t: usize| {
+        c[t * n * 4..(t + 1) * n * 4]
+            .iter()
+            .fold(0.0f32, |m, x| m.max(x.abs()))
+    };
+    assert!(c.iter().all(|x| x.is_finite()));
+    // Frame 0 is the seeded state (C = 0). In free flight the blocks translate uniformly
+    // (gravity adds the same velocity everywhere) and the pool rests: no velocity gradient.
+    assert_eq!(largest(0), 0.0);
+    assert!(
+        largest(3) < 1e-3,
+        "largest |C| in free flight: {}",
+        largest(3)
+    );
+    // By step 30 the blocks (24 cells apart, closing at 24 cells/s) have collided: shear.
+    assert!(
+        largest(30) > 1.0,
+        "largest |C| after the collision: {}",
+        largest(30)
+    );
     let _ = std::fs::remove_dir_all(dir);
 }
 
