@@ -1577,7 +1577,7 @@ fn strided_zip<T: Copy, U>(
         let repeated = [0, 1];
         if sa[..] == row && sb[..] == repeated {
             let (x, y) = (rows_of(a, outer * inner), rows_of(b, inner));
-            return zip_rows(x, y, inner, |x, y| f(x, y));
+            return zip_rows(x, y, inner, &f);
         }
         if sa[..] == repeated && sb[..] == row {
             let (x, y) = (rows_of(a, inner), rows_of(b, outer * inner));
