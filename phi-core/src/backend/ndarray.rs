@@ -589,83 +589,73 @@ fn extrapolate_frontier(
     for axis in (0..d.saturating_sub(1)).rev() {
         strides[axis] = strides[axis + 1] * grid[axis + 1];
     }
-    let index_of = |site: usize, index: &mut [usize]| {
+    // The 3^d box around a site, itself included: per box position `k` (row-major over the
+    // per-axis steps −1, 0, +1, axis 0 slowest), its flat offset and its step per axis.
+    let positions = 3usize.pow(d as u32);
+    let mut box_offset = vec![0isize; positions];
+    let mut box_step = vec![0i8; positions * d];
+    for k in 0..positions {
+        let mut rest = k;
+        for axis in (0..d).rev() {
+            let step = (rest % 3) as i8 - 1;
+            rest /= 3;
+            box_step[k * d + axis] = step;
+            box_offset[k] += step as isize * strides[axis] as isize;
+        }
+    }
+    // Which box positions of `site` lie within the grid: `inside[k]` (`index`: scratch for the
+    // site's multi-index).
+    let box_inside = |site: usize, index: &mut [usize], inside: &mut [bool]| {
         let mut rest = site;
         for (i, &stride) in index.iter_mut().zip(&strides) {
             *i = rest / stride;
             rest %= stride;
         }
+        for (k, inside) in inside.iter_mut().enumerate() {
+            *inside = box_step[k * d..(k + 1) * d]
+                .iter()
+                .zip(index.iter().zip(grid))
+                .all(|(&step, (&i, &n))| match step {
+                    -1 => i > 0,
+                    1 => i + 1 < n,
+                    _ => true,
+                });
+        }
     };
-    // Every site of the 3^d box around `site` (itself included), within the grid.
-    fn for_each_in_box(
-        site: usize,
-        index: &[usize],
-        grid: &[usize],
-        strides: &[usize],
-        f: &mut impl FnMut(usize),
-    ) {
-        fn walk(
-            axis: usize,
-            site: usize,
-            index: &[usize],
-            grid: &[usize],
-            strides: &[usize],
-            f: &mut impl FnMut(usize),
-        ) {
-            if axis == grid.len() {
-                f(site);
-                return;
-            }
-            walk(axis + 1, site, index, grid, strides, f);
-            if index[axis] > 0 {
-                walk(axis + 1, site - strides[axis], index, grid, strides, f);
-            }
-            if index[axis] + 1 < grid[axis] {
-                walk(axis + 1, site + strides[axis], index, grid, strides, f);
+    // The box sum of the gathered `values` (one per box position, 0 outside the grid) in
+    // box_sum_in_place's order: axis 0 first, each as `(below + centre) + above`. Sums in place;
+    // the result is `values[0]`.
+    let reduce_box = |values: &mut [f32]| {
+        let mut len = values.len();
+        for _ in 0..d {
+            len /= 3;
+            for j in 0..len {
+                values[j] = (values[j] + values[len + j]) + values[2 * len + j];
             }
         }
-        walk(0, site, index, grid, strides, f);
-    }
-    // The box sum of `base` at `site` in box_sum_in_place's order: `level` axes summed so far.
-    fn box_at(
-        level: usize,
-        site: usize,
-        index: &[usize],
-        grid: &[usize],
-        strides: &[usize],
-        base: &impl Fn(usize) -> f32,
-    ) -> f32 {
-        if level == 0 {
-            return base(site);
-        }
-        let axis = level - 1;
-        let centre = box_at(level - 1, site, index, grid, strides, base);
-        let below = if index[axis] > 0 {
-            box_at(level - 1, site - strides[axis], index, grid, strides, base)
-        } else {
-            0.0
-        };
-        let above = if index[axis] + 1 < grid[axis] {
-            box_at(level - 1, site + strides[axis], index, grid, strides, base)
-        } else {
-            0.0
-        };
-        (below + centre) + above
-    }
+        values[0]
+    };
 
     let mut queued = vec![false; sites];
-    let mut index = vec![0usize; d];
     let mut frontier = Vec::new();
-    let mut enqueue_neighbours =
-        |site: usize, mask: &[f32], queued: &mut [bool], out: &mut Vec<usize>| {
-            index_of(site, &mut index);
-            for_each_in_box(site, &index, grid, &strides, &mut |nb| {
+    let mut inside = vec![false; positions];
+    let mut index = vec![0usize; d];
+    let mut enqueue_neighbours = |site: usize,
+                                  mask: &[f32],
+                                  queued: &mut [bool],
+                                  inside: &mut [bool],
+                                  out: &mut Vec<usize>| {
+        box_inside(site, &mut index, inside);
+        for (&offset, &within) in box_offset.iter().zip(inside.iter()) {
+            if within {
+                let nb = site.wrapping_add_signed(offset);
                 if mask[nb] == 0.0 && !queued[nb] {
                     queued[nb] = true;
                     out.push(nb);
                 }
-            });
-        };
+            }
+        }
+    };
     // The first frontier from one whole-grid box sum of the mask (row-wise, cheap): the invalid
     // sites that see a valid one.
     let mut near = mask.to_vec();
@@ -677,6 +667,9 @@ fn extrapolate_frontier(
         }
     }
     let mut updates = Vec::new();
+    let mut count_box = vec![0.0f32; positions];
+    let mut sum_box = vec![0.0f32; positions * channels];
+    let mut next = Vec::new();
     let mut at = vec![0usize; d];
     for _ in 0..cells {
         if frontier.is_empty() {
@@ -684,26 +677,39 @@ fn extrapolate_frontier(
         }
         updates.clear();
         for &site in &frontier {
-            index_of(site, &mut at);
-            let count = box_at(d, site, &at, grid, &strides, &|s| mask[s]);
+            // Gather the mask and the masked values over the box, zeros outside the grid.
+            box_inside(site, &mut at, &mut inside);
+            for (k, (&offset, &within)) in box_offset.iter().zip(inside.iter()).enumerate() {
+                if within {
+                    let nb = site.wrapping_add_signed(offset);
+                    let m = mask[nb];
+                    count_box[k] = m;
+                    for ch in 0..channels {
+                        sum_box[ch * positions + k] = v[nb * channels + ch] * m;
+                    }
+                } else {
+                    count_box[k] = 0.0;
+                    for ch in 0..channels {
+                        sum_box[ch * positions + k] = 0.0;
+                    }
+                }
+            }
+            let count = reduce_box(&mut count_box);
             // A frontier site has a valid neighbour: count > 0, and the composite divides by
             // `count + 0`.
-            for k in 0..channels {
-                let sum = box_at(d, site, &at, grid, &strides, &|s| {
-                    v[s * channels + k] * mask[s]
-                });
-                updates.push(sum / (count + 0.0));
+            for sums in sum_box.chunks_exact_mut(positions) {
+                updates.push(reduce_box(sums) / (count + 0.0));
             }
         }
         for (&site, new) in frontier.iter().zip(updates.chunks_exact(channels)) {
             v[site * channels..(site + 1) * channels].copy_from_slice(new);
             mask[site] = 1.0;
         }
-        let mut next = Vec::new();
+        next.clear();
         for &site in &frontier {
-            enqueue_neighbours(site, mask, &mut queued, &mut next);
+            enqueue_neighbours(site, mask, &mut queued, &mut inside, &mut next);
         }
-        frontier = next;
+        std::mem::swap(&mut frontier, &mut next);
     }
 }
 
@@ -1067,7 +1073,7 @@ struct LatticeIndexer {
     /// `shape − 1`: the clamp of continuous indices.
     upper: Vec<f32>,
     /// `max(shape − 2, 0)`: the highest lower corner.
-    highest_base: Vec<f32>,
+    highest_base: Vec<usize>,
     strides: Vec<usize>,
     shape: Vec<usize>,
 }
@@ -1083,11 +1089,7 @@ impl LatticeIndexer {
             origin: lattice.origin.clone(),
             inverse_spacing: lattice.spacing.iter().map(|s| 1.0 / s).collect(),
             upper: lattice.shape.iter().map(|&s| (s - 1) as f32).collect(),
-            highest_base: lattice
-                .shape
-                .iter()
-                .map(|&s| s.saturating_sub(2) as f32)
-                .collect(),
+            highest_base: lattice.shape.iter().map(|&s| s.saturating_sub(2)).collect(),
             strides,
             shape: lattice.shape.clone(),
         }
@@ -1113,18 +1115,24 @@ struct FixedIndexer<const D: usize> {
     origin: [f32; D],
     inverse_spacing: [f32; D],
     upper: [f32; D],
-    highest_base: [f32; D],
+    /// `max(shape − 2, 0)` as an integer: the highest lower corner.
+    highest_base: [i32; D],
     strides: [usize; D],
 }
 
 impl<const D: usize> FixedIndexer<D> {
     fn new(indexer: &LatticeIndexer) -> Self {
         let pick = |v: &[f32]| std::array::from_fn(|axis| v[axis]);
+        // The lower corners are computed in `i32` (below): the lattice must index within it.
+        assert!(
+            indexer.shape.iter().product::<usize>() <= i32::MAX as usize,
+            "lattice too large"
+        );
         Self {
             origin: pick(&indexer.origin),
             inverse_spacing: pick(&indexer.inverse_spacing),
             upper: pick(&indexer.upper),
-            highest_base: pick(&indexer.highest_base),
+            highest_base: std::array::from_fn(|axis| indexer.highest_base[axis] as i32),
             strides: std::array::from_fn(|axis| indexer.strides[axis]),
         }
     }
@@ -1138,6 +1146,17 @@ impl<const D: usize> FixedIndexer<D> {
             .min(self.upper[axis])
     }
 
+    /// The lower corner along `axis` of a continuous index `t` (from
+    /// [`continuous`](Self::continuous)) and the fraction beyond it: `min(trunc(t), shape − 2)`
+    /// in integers. `t` is clamped to `[0, shape − 1]`, so truncation is the floor, and these
+    /// integers convert to `f32` exactly, which makes it the composite's
+    /// `min(floor(t), shape − 2)` bit for bit.
+    #[inline(always)]
+    fn base(&self, t: f32, axis: usize) -> (i32, f32) {
+        let b = (t as i32).min(self.highest_base[axis]);
+        (b, t - b as f32)
+    }
+
     /// The flat lower corner and the fractions of `point`: the continuous index
     /// `(x − origin) / spacing` clamped to `[0, shape − 1]`, its integer part capped at
     /// `shape − 2`, as the composite computes it.
@@ -1146,10 +1165,33 @@ impl<const D: usize> FixedIndexer<D> {
         let mut flat = 0;
         let mut fraction = [0.0f32; D];
         for axis in 0..D {
-            let t = self.continuous(point[axis], axis);
-            let b = (t as u32 as f32).min(self.highest_base[axis]);
+            let (b, f) = self.base(self.continuous(point[axis], axis), axis);
             flat += b as usize * self.strides[axis];
-            fraction[axis] = t - b;
+            fraction[axis] = f;
+        }
+        (flat, fraction)
+    }
+
+    /// [`lower_corner`](Self::lower_corner) of a block of points `x` (coordinate-major:
+    /// `x[axis][point]`): the flat lower corners and the fractions (`fraction[axis][point]`).
+    /// The arithmetic runs lane by lane over the block, which the compiler vectorises.
+    #[inline(always)]
+    #[allow(clippy::needless_range_loop)] // index loops over lanes vectorise
+    fn lower_corners(&self, x: &[Lane; D]) -> ([usize; LANES], [Lane; D]) {
+        let mut fraction = [[0.0f32; LANES]; D];
+        let mut base = [[0i32; LANES]; D];
+        for axis in 0..D {
+            for i in 0..LANES {
+                let (b, f) = self.base(self.continuous(x[axis][i], axis), axis);
+                base[axis][i] = b;
+                fraction[axis][i] = f;
+            }
+        }
+        let mut flat = [0usize; LANES];
+        for i in 0..LANES {
+            for axis in 0..D {
+                flat[i] += base[axis][i] as usize * self.strides[axis];
+            }
         }
         (flat, fraction)
     }
@@ -1182,15 +1224,12 @@ fn sample_kernel<const D: usize>(
     let offsets = corner_offsets::<D>(indexer);
     let fixed = FixedIndexer::<D>::new(indexer);
     if c == 1 {
-        // One channel (a staggered component): a scalar accumulator, corners in the same order.
-        for (point, o) in p.chunks_exact(D).zip(out.iter_mut()) {
-            let (flat, fraction) = fixed.lower_corner(point);
-            let mut sum = 0.0f32;
-            for (corner, &offset) in offsets.iter().enumerate().take(1 << D) {
-                sum += v[flat + offset] * corner_weight::<D>(corner, &fraction);
-            }
-            *o = sum;
-        }
+        // One channel (a staggered component): blocks of points, corners in the same order.
+        let sampler = ComponentSampler::<D>::new(indexer, v);
+        for_each_block::<D>(p, |first, x, count| {
+            let values = sampler.sample_block(x);
+            out[first..first + count].copy_from_slice(&values[..count]);
+        });
         return;
     }
     for (point, row) in p.chunks_exact(D).zip(out.chunks_exact_mut(c)) {
@@ -1205,8 +1244,17 @@ fn sample_kernel<const D: usize>(
     }
 }
 
-/// One staggered component ready for point queries: the lattice's index arithmetic, its corner
-/// offsets and its values `[samples]`.
+/// Points per block of the vectorised point loops ([`ComponentSampler::sample_block`] and the
+/// kernels built on it). Each step of the interpolation runs over a whole block before the next,
+/// in structure-of-arrays layout, so that the compiler turns the arithmetic into SIMD
+/// instructions and the independent points keep the pipeline full.
+const LANES: usize = 16;
+
+/// One coordinate (or velocity component) of a block of [`LANES`] points.
+type Lane = [f32; LANES];
+
+/// One staggered component (or one channel of a lattice) ready for point queries: the lattice's
+/// index arithmetic, its corner offsets and its values `[samples]`.
 struct ComponentSampler<'a, const D: usize> {
     indexer: FixedIndexer<D>,
     offsets: [usize; 8],
@@ -1214,31 +1262,66 @@ struct ComponentSampler<'a, const D: usize> {
 }
 
 impl<'a, const D: usize> ComponentSampler<'a, D> {
-    fn new(lattice: &SampleLattice, values: &'a [f32]) -> Self {
-        let indexer = LatticeIndexer::new(lattice);
+    fn new(indexer: &LatticeIndexer, values: &'a [f32]) -> Self {
+        let samples: usize = indexer.shape.iter().product();
+        assert_eq!(values.len(), samples, "one value per lattice sample");
         Self {
-            indexer: FixedIndexer::new(&indexer),
-            offsets: corner_offsets::<D>(&indexer),
+            indexer: FixedIndexer::new(indexer),
+            offsets: corner_offsets::<D>(indexer),
             values,
         }
     }
 
-    /// The value at `point`, as [`sample_kernel`]'s one-channel loop computes it.
+    /// The values at a block of points `x` (coordinate-major: `x[axis][point]`), each as
+    /// [`sample_kernel`] computes it with one channel, in three passes over the block: the
+    /// lower corners and fractions ([`FixedIndexer::lower_corners`], vectorised); the `2^D`
+    /// corner values (scalar loads); the tent weights and the weighted sum over the corners
+    /// (vectorised).
     #[inline(always)]
-    fn sample(&self, point: &[f32; D]) -> f32 {
-        let (flat, fraction) = self.indexer.lower_corner(point);
-        let mut sum = 0.0f32;
-        for (corner, &offset) in self.offsets.iter().enumerate().take(1 << D) {
-            sum += self.values[flat + offset] * corner_weight::<D>(corner, &fraction);
+    #[allow(clippy::needless_range_loop)] // index loops over lanes vectorise
+    fn sample_block(&self, x: &[Lane; D]) -> Lane {
+        let (flat, fraction) = self.indexer.lower_corners(x);
+        let mut corners = [[0.0f32; LANES]; 8];
+        for i in 0..LANES {
+            for corner in 0..(1 << D) {
+                corners[corner][i] = self.values[flat[i] + self.offsets[corner]];
+            }
         }
-        sum
+        let mut out = [0.0f32; LANES];
+        for i in 0..LANES {
+            let f: [f32; D] = std::array::from_fn(|axis| fraction[axis][i]);
+            let mut sum = 0.0f32;
+            for corner in 0..(1 << D) {
+                sum += corners[corner][i] * corner_weight::<D>(corner, &f);
+            }
+            out[i] = sum;
+        }
+        out
+    }
+}
+
+/// The points `p [N, D]` (row-major) in blocks of [`LANES`], coordinate-major: `f` gets each
+/// block and the number of real points in it. The last block is padded with zeros (a valid
+/// position: queries are clamped to the lattice), whose results `f` ignores.
+#[allow(clippy::needless_range_loop)] // the axes of a point, unrolled
+fn for_each_block<const D: usize>(p: &[f32], mut f: impl FnMut(usize, &[Lane; D], usize)) {
+    for (block, points) in p.chunks(D * LANES).enumerate() {
+        let mut x = [[0.0f32; LANES]; D];
+        for (i, point) in points.chunks_exact(D).enumerate() {
+            for axis in 0..D {
+                x[axis][i] = point[axis];
+            }
+        }
+        f(block * LANES, &x, points.len() / D);
     }
 }
 
 /// Points moved through a staggered velocity as
-/// [`composite_advect_points`](crate::fields::sample::composite_advect_points) moves them, every
-/// stage of one point in registers: the same operations in the same order, so the same values.
-#[allow(clippy::needless_range_loop)] // index loops over [f32; D] unroll into registers
+/// [`composite_advect_points`](crate::fields::sample::composite_advect_points) moves them: the
+/// same operations in the same order, so the same values, on blocks of [`LANES`] points stage by
+/// stage (each stage depends on the one before, so the independent points of a block are what
+/// keeps the pipeline full, and the element-wise steps vectorise).
+#[allow(clippy::needless_range_loop)] // index loops over lanes vectorise
 fn advect_kernel<const D: usize>(
     lattices: &[SampleLattice],
     values: &[&[f32]],
@@ -1249,68 +1332,57 @@ fn advect_kernel<const D: usize>(
     let components: Vec<ComponentSampler<'_, D>> = lattices
         .iter()
         .zip(values)
-        .map(|(lattice, values)| ComponentSampler::new(lattice, values))
+        .map(|(lattice, values)| ComponentSampler::new(&LatticeIndexer::new(lattice), values))
         .collect();
     let components = &components[..D];
-    // Plain loops over fixed-size arrays: the compiler unrolls them and keeps the stages in
-    // registers.
     #[inline(always)]
-    fn velocity<const D: usize>(components: &[ComponentSampler<'_, D>], x: &[f32; D]) -> [f32; D] {
-        let mut k = [0.0f32; D];
-        for a in 0..D {
-            k[a] = components[a].sample(x);
-        }
-        k
+    fn velocity<const D: usize>(
+        components: &[ComponentSampler<'_, D>],
+        x: &[Lane; D],
+    ) -> [Lane; D] {
+        std::array::from_fn(|axis| components[axis].sample_block(x))
     }
+    /// `x + k h`, lane by lane.
     #[inline(always)]
-    fn step<const D: usize>(x: &[f32; D], k: &[f32; D], h: f32) -> [f32; D] {
-        let mut y = [0.0f32; D];
-        for a in 0..D {
-            y[a] = x[a] + k[a] * h;
+    fn step<const D: usize>(x: &[Lane; D], k: &[Lane; D], h: f32) -> [Lane; D] {
+        let mut y = [[0.0f32; LANES]; D];
+        for axis in 0..D {
+            for i in 0..LANES {
+                y[axis][i] = x[axis][i] + k[axis][i] * h;
+            }
         }
         y
     }
-    // The points go in blocks, stage by stage: each stage depends on the one before, so the
-    // independent points of a block are what keeps the pipeline full.
-    const BLOCK: usize = 16;
     let (half, sixth) = (0.5 * dt, dt / 6.0);
     let mut out = vec![0.0f32; p.len()];
-    let mut stages = [[[0.0f32; D]; BLOCK]; 4];
-    let mut at = [[0.0f32; D]; BLOCK];
-    for (points, o) in p.chunks(D * BLOCK).zip(out.chunks_mut(D * BLOCK)) {
-        let count = points.len() / D;
-        let mut x = [[0.0f32; D]; BLOCK];
-        for (xi, point) in x.iter_mut().zip(points.chunks_exact(D)) {
-            xi.copy_from_slice(point);
-        }
-        let (x, moved) = (&x[..count], o);
-        match integrator {
-            Integrator::Euler => {
-                for (xi, o) in x.iter().zip(moved.chunks_exact_mut(D)) {
-                    o.copy_from_slice(&step(xi, &velocity(components, xi), dt));
-                }
-            }
+    for_each_block::<D>(p, |first, x, count| {
+        let moved = match integrator {
+            Integrator::Euler => step(x, &velocity(components, x), dt),
             Integrator::Rk4 => {
-                for (k, xi) in stages[0].iter_mut().zip(x) {
-                    *k = velocity(components, xi);
-                }
-                for (stage, h) in [(1, half), (2, half), (3, dt)] {
-                    for ((y, xi), k) in at.iter_mut().zip(x).zip(&stages[stage - 1]) {
-                        *y = step(xi, k, h);
-                    }
-                    for (k, y) in stages[stage].iter_mut().zip(&at[..count]) {
-                        *k = velocity(components, y);
-                    }
-                }
-                let [k1, k2, k3, k4] = &stages;
-                for (i, (xi, o)) in x.iter().zip(moved.chunks_exact_mut(D)).enumerate() {
-                    for a in 0..D {
-                        o[a] = xi[a] + (k1[i][a] + k4[i][a] + (k2[i][a] + k3[i][a]) * 2.0) * sixth;
+                let k1 = velocity(components, x);
+                let k2 = velocity(components, &step(x, &k1, half));
+                let k3 = velocity(components, &step(x, &k2, half));
+                let k4 = velocity(components, &step(x, &k3, dt));
+                let mut moved = [[0.0f32; LANES]; D];
+                for axis in 0..D {
+                    let [k1, k2, k3, k4] = [&k1[axis], &k2[axis], &k3[axis], &k4[axis]];
+                    for i in 0..LANES {
+                        moved[axis][i] =
+                            x[axis][i] + (k1[i] + k4[i] + (k2[i] + k3[i]) * 2.0) * sixth;
                     }
                 }
+                moved
+            }
+        };
+        for (i, o) in out[first * D..(first + count) * D]
+            .chunks_exact_mut(D)
+            .enumerate()
+        {
+            for axis in 0..D {
+                o[axis] = moved[axis][i];
             }
         }
-    }
+    });
     out
 }
 
@@ -1326,27 +1398,47 @@ fn splat_kernel<const D: usize>(
     (sums, weights): (&mut [f32], &mut [f32]),
 ) {
     let fixed = FixedIndexer::<D>::new(indexer);
-    let mut add = |at: usize, value: &[f32], weight: f32| {
+    /// Adds `weight · value` to the sums of sample `at` and `weight` to its weight.
+    #[inline(always)]
+    fn add(sums: &mut [f32], weights: &mut [f32], at: usize, value: &[f32], weight: f32) {
+        let c = value.len();
         for (s, &x) in sums[at * c..(at + 1) * c].iter_mut().zip(value) {
             *s += x * weight;
         }
         weights[at] += weight;
-    };
+    }
     match transfer {
         Transfer::NearestFace => {
             for (point, value) in p.chunks_exact(D).zip(v.chunks_exact(c)) {
-                add(nearest_sample(&fixed, point), value, 1.0);
+                add(sums, weights, nearest_sample(&fixed, point), value, 1.0);
             }
         }
         Transfer::Linear => {
             let offsets = corner_offsets::<D>(indexer);
-            let stencils: Vec<(usize, [f32; D])> = p
-                .chunks_exact(D)
-                .map(|point| fixed.lower_corner(point))
-                .collect();
+            let n = p.len() / D;
+            let mut flats = vec![0usize; n];
+            let mut fractions = vec![[0.0f32; D]; n];
+            for_each_block::<D>(p, |first, x, count| {
+                let (flat, fraction) = fixed.lower_corners(x);
+                flats[first..first + count].copy_from_slice(&flat[..count]);
+                for (i, f) in fractions[first..first + count].iter_mut().enumerate() {
+                    *f = std::array::from_fn(|axis| fraction[axis][i]);
+                }
+            });
             for (corner, &offset) in offsets.iter().enumerate().take(1 << D) {
-                for ((flat, fraction), value) in stencils.iter().zip(v.chunks_exact(c)) {
-                    add(flat + offset, value, corner_weight::<D>(corner, fraction));
+                let stencils = flats.iter().zip(&fractions);
+                if c == 1 {
+                    // One channel (a staggered component): no row slices.
+                    for ((&flat, fraction), &x) in stencils.zip(v) {
+                        let weight = corner_weight::<D>(corner, fraction);
+                        sums[flat + offset] += x * weight;
+                        weights[flat + offset] += weight;
+                    }
+                } else {
+                    for ((&flat, fraction), value) in stencils.zip(v.chunks_exact(c)) {
+                        let weight = corner_weight::<D>(corner, fraction);
+                        add(sums, weights, flat + offset, value, weight);
+                    }
                 }
             }
         }
@@ -1477,6 +1569,21 @@ fn strided_zip<T: Copy, U>(
     f: impl Fn(T, T) -> U,
 ) -> Vec<U> {
     let (cshape, strides) = collapse(shape, [strides_in(a, shape), strides_in(b, shape)]);
+    // One row-major operand against one row repeated (a `[1, k]` bias or bound against points
+    // `[N, k]`): whole rows at a time, unrolled for the short rows of point coordinates.
+    if let ([outer, inner], [sa, sb]) = (&cshape[..], &strides) {
+        let (outer, inner) = (*outer, *inner);
+        let row = [inner as isize, 1];
+        let repeated = [0, 1];
+        if sa[..] == row && sb[..] == repeated {
+            let (x, y) = (rows_of(a, outer * inner), rows_of(b, inner));
+            return zip_rows(x, y, inner, &f);
+        }
+        if sa[..] == repeated && sb[..] == row {
+            let (x, y) = (rows_of(a, inner), rows_of(b, outer * inner));
+            return zip_rows(y, x, inner, |y, x| f(x, y));
+        }
+    }
     let mut out = Vec::with_capacity(out_len(shape));
     let (pa, pb) = (a.as_ptr(), b.as_ptr());
     for_each_row(&cshape, &strides, |[oa, ob], len, [sa, sb]| {
@@ -1506,6 +1613,39 @@ fn strided_zip<T: Copy, U>(
         }
     });
     out
+}
+
+/// The first `len` elements of `t` in memory order, from its first element (for a view whose
+/// collapsed strides say that they are consecutive).
+fn rows_of<T>(t: &Tensor<T>, len: usize) -> &[T] {
+    assert!(len <= t.len(), "a view holds its own elements");
+    // SAFETY: the caller's collapsed strides walk `len` consecutive elements from `t`'s first
+    // one, all within `t`'s buffer (its elements, as `strided_map` reads them); checked above
+    // that `t` has that many.
+    unsafe { std::slice::from_raw_parts(t.as_ptr(), len) }
+}
+
+/// `f(x, y)` for each row of `rows` (row-major, rows of `inner`) against the one row `y`.
+fn zip_rows<T: Copy, U>(rows: &[T], y: &[T], inner: usize, f: impl Fn(T, T) -> U) -> Vec<U> {
+    fn fixed<T: Copy, U, const K: usize>(rows: &[T], y: &[T], f: impl Fn(T, T) -> U) -> Vec<U> {
+        let y: [T; K] = std::array::from_fn(|k| y[k]);
+        // An exact-length iterator: collected without per-element capacity checks.
+        rows.iter()
+            .enumerate()
+            .map(|(i, &x)| f(x, y[i % K]))
+            .collect()
+    }
+    match inner {
+        2 => fixed::<T, U, 2>(rows, y, f),
+        3 => fixed::<T, U, 3>(rows, y, f),
+        _ => {
+            let mut out = Vec::with_capacity(rows.len());
+            for row in rows.chunks_exact(inner) {
+                out.extend(row.iter().zip(y).map(|(&x, &y)| f(x, y)));
+            }
+            out
+        }
+    }
 }
 
 // -------------------------------------------------------------------- matmul
@@ -1951,13 +2091,18 @@ mod tests {
 
     #[test]
     fn broadcasting_across_ranks() {
-        let cases: [(&[usize], &[usize]); 6] = [
+        let cases: [(&[usize], &[usize]); 10] = [
             (&[3], &[2, 1]),
             (&[2, 1, 3], &[4, 1]),
             (&[1], &[2, 3]),
             (&[2, 3], &[1, 1, 1]),
             (&[5, 1, 4], &[5, 3, 1]),
             (&[0, 3], &[1, 3]),
+            // One row against rows of 2, 3 and 5 (the points-against-bounds fast path).
+            (&[7, 2], &[1, 2]),
+            (&[3], &[4, 3]),
+            (&[6, 5], &[5]),
+            (&[1, 2], &[9, 2]),
         ];
         for (sa, sb) in cases {
             let (a, b) = (

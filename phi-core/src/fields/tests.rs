@@ -257,3 +257,66 @@ fn fused_point_advection_matches_the_composite_bit_for_bit() {
         }
     }
 }
+
+#[test]
+fn fused_lattice_transfers_match_the_composite_bit_for_bit() {
+    use crate::Backend;
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand::rngs::StdRng::seed_from_u64(13);
+    let bits = |t: &ndarray::ArcArray<f32, ndarray::IxDyn>| {
+        t.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+    };
+    for res in [vec![9], vec![7, 5], vec![4, 6, 5]] {
+        let domain = unit(&res);
+        let d = res.len();
+        // Not a whole number of the kernels' blocks; inside, on the edges and beyond the domain.
+        let n = 37;
+        let points: Vec<f32> = (0..n * d)
+            .map(|k| rng.random_range(-1.0..res[k % d] as f32 + 1.0))
+            .collect();
+        let points = T::from_vec(points, &[n, d], &device()).unwrap();
+        for lattice in sample::staggered_lattices(&domain) {
+            let samples: usize = lattice.shape.iter().product();
+            for c in [1, 3] {
+                let grid: Vec<f32> = (0..samples * c)
+                    .map(|_| rng.random_range(-3.0..3.0))
+                    .collect();
+                let grid = T::from_vec(grid, &[samples, c], &device()).unwrap();
+                let fused = NdArray::float_lattice_sample(
+                    &lattice,
+                    grid.primitive().clone(),
+                    points.primitive().clone(),
+                )
+                .unwrap();
+                let plain = sample::composite_lattice_sample::<NdArray>(
+                    &lattice,
+                    grid.primitive().clone(),
+                    points.primitive().clone(),
+                )
+                .unwrap();
+                assert_eq!(bits(&fused), bits(&plain), "sample {res:?} c = {c}");
+                let values: Vec<f32> = (0..n * c).map(|_| rng.random_range(-3.0..3.0)).collect();
+                let values = T::from_vec(values, &[n, c], &device()).unwrap();
+                for transfer in [Transfer::Linear, Transfer::NearestFace] {
+                    let (fused_sums, fused_weights) = NdArray::float_lattice_splat(
+                        &lattice,
+                        points.primitive().clone(),
+                        values.primitive().clone(),
+                        transfer,
+                    )
+                    .unwrap();
+                    let (plain_sums, plain_weights) = sample::composite_lattice_splat::<NdArray>(
+                        &lattice,
+                        points.primitive().clone(),
+                        values.primitive().clone(),
+                        transfer,
+                    )
+                    .unwrap();
+                    let case = format!("splat {res:?} c = {c} {transfer:?}");
+                    assert_eq!(bits(&fused_sums), bits(&plain_sums), "{case}");
+                    assert_eq!(bits(&fused_weights), bits(&plain_weights), "{case}");
+                }
+            }
+        }
+    }
+}
