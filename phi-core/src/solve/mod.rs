@@ -32,6 +32,7 @@
 mod native;
 mod poisson;
 mod sparse;
+mod up_looking;
 
 pub use native::{adjoint_solve_f32, solve, solve_f32, solve_transpose, solve_transpose_f32};
 pub use poisson::{PoissonSystem, Weight, all_faces_open, grid_elimination_order, poisson_matrix};
