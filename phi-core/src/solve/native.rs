@@ -1,5 +1,5 @@
-//! The native (host, `f64`) solvers: preconditioned conjugate gradients, and faer's sparse
-//! Cholesky and LU.
+//! The native (host, `f64`) solvers: preconditioned conjugate gradients, sparse Cholesky (faer's,
+//! and our up-looking one for small matrices of a new pattern) and faer's sparse LU.
 
 use std::sync::Arc;
 
