@@ -32,6 +32,7 @@
 mod native;
 mod poisson;
 mod sparse;
+mod up_looking;
 
 pub use native::{adjoint_solve_f32, solve, solve_f32, solve_transpose, solve_transpose_f32};
 pub use poisson::{PoissonSystem, Weight, all_faces_open, grid_elimination_order, poisson_matrix};
@@ -52,8 +53,10 @@ pub enum SolveMethod {
     /// Conjugate gradients with a preconditioner; the matrix must be symmetric positive
     /// definite. Obeys `max_iterations`.
     ConjugateGradient(Preconditioner),
-    /// faer's supernodal/simplicial sparse Cholesky (`LLᵀ`, AMD ordering); the matrix must be
-    /// symmetric positive definite. Direct: `max_iterations` does not apply.
+    /// Sparse Cholesky (`LLᵀ`): faer's supernodal/simplicial factorization with an AMD ordering,
+    /// or, for a matrix with its own elimination order ([`SparseMatrix::with_ordering`]), our
+    /// up-looking factorization (small matrices of a new pattern) or faer's in that order. The
+    /// matrix must be symmetric positive definite. Direct: `max_iterations` does not apply.
     Cholesky,
     /// faer's sparse LU with partial pivoting, for any square non-singular matrix. Direct.
     Lu,

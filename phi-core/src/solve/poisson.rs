@@ -220,15 +220,6 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
     let mut diagonal_at = Vec::with_capacity(n);
     row_ptr.push(0);
     let mut anchored = vec![false; n];
-    // Union-find over unknowns joined by open faces.
-    let mut parent: Vec<usize> = (0..n).collect();
-    fn find(parent: &mut [usize], mut x: usize) -> usize {
-        while parent[x] != x {
-            parent[x] = parent[parent[x]];
-            x = parent[x];
-        }
-        x
-    }
 
     // Per axis: the sides' boundary conditions, the coefficient, and the stride of the face
     // array, walked alongside the cells (the lower face of a cell along `axis` has the cell's
@@ -297,16 +288,7 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
                 };
                 diagonal += coefficient;
                 match cell_to_unknown[neighbour] {
-                    Some(v) => {
-                        *slot = Some((v, -coefficient));
-                        // Each open face between unknowns is seen from both cells: join the
-                        // regions once, from the upper cell, under the smaller root (the first
-                        // unknown of a region stays its root, so paths stay short).
-                        if !is_upper {
-                            let (a, b) = (find(&mut parent, u), find(&mut parent, v));
-                            parent[a.max(b)] = a.min(b);
-                        }
-                    }
+                    Some(v) => *slot = Some((v, -coefficient)),
                     None => anchored[u] = true,
                 }
             }
@@ -325,20 +307,31 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
         row_ptr.push(col_indices.len());
     }
 
-    // Regions, numbered in order of their first unknown.
+    // Regions, numbered in order of their first unknown: a flood fill from each unknown not yet
+    // reached, over the matrix's off-diagonal entries (exactly the open faces between unknowns).
     let mut region_of = vec![usize::MAX; n];
-    let mut root_region = vec![usize::MAX; n];
     let mut region_anchored = Vec::new();
     let mut region_first = Vec::new();
-    for u in 0..n {
-        let root = find(&mut parent, u);
-        if root_region[root] == usize::MAX {
-            root_region[root] = region_anchored.len();
-            region_anchored.push(false);
-            region_first.push(u);
+    let mut pending = Vec::new();
+    for first in 0..n {
+        if region_of[first] != usize::MAX {
+            continue;
         }
-        region_of[u] = root_region[root];
-        region_anchored[region_of[u]] |= anchored[u];
+        let region = region_anchored.len();
+        let mut is_anchored = false;
+        region_of[first] = region;
+        pending.push(first);
+        while let Some(u) = pending.pop() {
+            is_anchored |= anchored[u];
+            for &v in &col_indices[row_ptr[u]..row_ptr[u + 1]] {
+                if region_of[v] == usize::MAX {
+                    region_of[v] = region;
+                    pending.push(v);
+                }
+            }
+        }
+        region_anchored.push(is_anchored);
+        region_first.push(first);
     }
     let pin = coefficients.iter().copied().fold(0.0, f64::max);
     let mut pinned = Vec::new();
