@@ -159,8 +159,8 @@ pub struct OptimizeSummary {
     pub iterations: usize,
     /// The loss per iteration.
     pub losses: Vec<f32>,
-    /// The first iteration whose loss is within 1% of the lowest, or within round-off of it
-    /// (see [`convergence_iteration`]): the convergence point.
+    /// The iteration from which the loss stays within 1% of the lowest, or within round-off of
+    /// it (see [`convergence_iteration`]): the convergence point.
     pub converged_at: usize,
     /// Chamfer distance of the simulated liquid to the target, first and last iteration.
     pub chamfer: [f32; 2],

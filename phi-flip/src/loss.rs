@@ -406,15 +406,19 @@ pub fn density_loss<B: Backend>(
     }
     let target = target.detach();
     let grids = density_grids(domain, levels)?;
-    let fine = density(&target, domain)?.to_vec();
+    let targets = grids
+        .iter()
+        .map(|grid| density(&target, grid))
+        .collect::<Result<Vec<_>>>()?;
+    let fine = targets[0].to_vec();
     let mass: f64 = fine.iter().map(|&r| f64::from(r)).sum();
     let squares: f64 = fine.iter().map(|&r| f64::from(r).powi(2)).sum();
     let mean_density = if mass > 0.0 { squares / mass } else { 1.0 };
+    let weight = (0.5 / (grids.len() as f64 * mean_density)) as f32;
     let mut total: Option<Tensor<B>> = None;
-    for grid in &grids {
-        let difference = density(positions, grid)? - density(&target, grid)?;
-        let weight = 0.5 / (grids.len() as f64 * mean_density);
-        let term = difference.square().sum() * weight as f32;
+    for (grid, target_density) in grids.iter().zip(&targets) {
+        let difference = density(positions, grid)? - target_density;
+        let term = difference.square().sum() * weight;
         total = Some(match total {
             Some(t) => t + term,
             None => term,

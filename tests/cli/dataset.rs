@@ -7,7 +7,7 @@ use phi::phi_gns::data::{
     Dataset, LIQUID, OBSTACLE, Trajectory, read_metadata, read_trajectory, read_trajectory_stats,
 };
 
-use super::{phi, scratch};
+use super::{ok, phi, scratch};
 
 fn run(args: &[&str], dirs: &[&Path]) -> Output {
     let mut command = phi();
@@ -16,16 +16,6 @@ fn run(args: &[&str], dirs: &[&Path]) -> Output {
         command.arg(d);
     }
     command.output().unwrap()
-}
-
-fn ok(output: Output) -> String {
-    assert!(
-        output.status.success(),
-        "stdout: {}\nstderr: {}",
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8_lossy(&output.stdout).into_owned()
 }
 
 fn generate(out: &Path, extra: &[&str]) -> Output {

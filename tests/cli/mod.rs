@@ -1,7 +1,7 @@
 //! The `phi` command line: `phi simulate` end to end, and its errors.
 
 use std::path::PathBuf;
-use std::process::Command;
+use std::process::{Command, Output};
 
 use phi::output::read_npz;
 
@@ -10,6 +10,17 @@ mod optimize;
 
 fn phi() -> Command {
     Command::new(env!("CARGO_BIN_EXE_phi"))
+}
+
+/// The standard output of a run that must have succeeded (otherwise both outputs are shown).
+fn ok(output: Output) -> String {
+    assert!(
+        output.status.success(),
+        "stdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8_lossy(&output.stdout).into_owned()
 }
 
 fn scratch(name: &str) -> PathBuf {
@@ -24,7 +35,7 @@ fn simulate_writes_trajectory_frames_and_gif() {
     let dir = scratch("simulate");
     let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/small32.toml");
     let out = dir.join("run");
-    let output = phi()
+    let stdout = ok(phi()
         .args(["simulate", scene, "--out"])
         .arg(&out)
         .args([
@@ -36,13 +47,7 @@ fn simulate_writes_trajectory_frames_and_gif() {
             "2",
         ])
         .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let stdout = String::from_utf8_lossy(&output.stdout);
+        .unwrap());
     assert!(stdout.contains("6 steps of 1024 particles"), "{stdout}");
     let arrays = read_npz(out.join("trajectory.npz")).unwrap();
     let get = |k: &str| {
@@ -82,17 +87,12 @@ fn simulate_records_apic_affine_matrices() {
         "/scenes/colliding_blocks_apic.toml"
     );
     let out = dir.join("run");
-    let output = phi()
+    ok(phi()
         .args(["simulate", scene, "--out"])
         .arg(&out)
         .args(["--steps", "30", "--frame-every", "0"])
         .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+        .unwrap());
     let arrays = read_npz(out.join("trajectory.npz")).unwrap();
     let get = |k: &str| arrays.iter().find(|(n, _)| n == k).map(|(_, a)| a.clone());
     let n = get("positions").unwrap().shape[1];

@@ -1,7 +1,7 @@
 //! `phi optimize` end to end: a short optimisation writes its loss curve, plot, frames and
 //! summary with a decreasing loss; a bad configuration is an error naming file and key.
 
-use super::{phi, scratch};
+use super::{ok, phi, scratch};
 
 const CONFIG: &str = r#"
 description = "A short test optimisation"
@@ -32,7 +32,7 @@ fn optimize_writes_loss_curve_plot_and_frames() {
     let config = dir.join("tiny.toml");
     std::fs::write(&config, CONFIG).unwrap();
     let out = dir.join("run");
-    let output = phi()
+    let stdout = ok(phi()
         .arg("optimize")
         .arg(&config)
         .arg("--out")
@@ -46,13 +46,7 @@ fn optimize_writes_loss_curve_plot_and_frames() {
             "2",
         ])
         .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let stdout = String::from_utf8_lossy(&output.stdout);
+        .unwrap());
     assert!(
         stdout.contains("5 iterations of 32 particles on burn"),
         "{stdout}"

@@ -78,6 +78,16 @@ fn round_trip_with<B: Backend>(
     (v, c)
 }
 
+/// A closed 16² box with the cells of the block `[4, 12]²` filled with jittered particles: the
+/// domain, the positions on the host `[N * 2]` and as a tensor `[N, 2]`.
+fn block_in_box() -> (Domain, Vec<f32>, Tensor<Nd>) {
+    let res = [16, 16];
+    let positions = filled::<Nd>(&res, &boxed(&[4.0, 4.0], &[12.0, 12.0]));
+    let n = positions.len() / 2;
+    let points = Tensor::from_vec(positions.clone(), &[n, 2], &Default::default()).unwrap();
+    (closed(&res), positions, points)
+}
+
 fn max_abs_difference(a: &[f32], b: &[f32]) -> f32 {
     assert_eq!(a.len(), b.len());
     a.iter()
@@ -102,12 +112,9 @@ fn angular_momentum(positions: &[f32], velocities: &[f32], centre: [f32; 2]) -> 
 /// amount and the block's angular momentum shrinks trip after trip.
 #[test]
 fn affine_round_trip_is_exact_with_apic_and_lossy_with_pic() {
-    let res = [16, 16];
-    let domain = closed(&res);
-    let device = Default::default();
-    let positions = filled::<Nd>(&res, &boxed(&[4.0, 4.0], &[12.0, 12.0]));
+    let (domain, positions, points) = block_in_box();
     let n = positions.len() / 2;
-    let points = Tensor::<Nd>::from_vec(positions.clone(), &[n, 2], &device).unwrap();
+    let device = points.device();
     let centre = [8.0, 8.0];
     let fields: [AffineField; 2] = [
         // A rigid rotation about the block's centre, ω = 1.5 rad/s.
@@ -198,12 +205,9 @@ fn affine_round_trip_is_exact_with_apic_and_lossy_with_pic() {
 /// extrapolated); PIC with the same transfer is not.
 #[test]
 fn affine_round_trip_is_exact_with_apic_and_nearest_transfer() {
-    let res = [16, 16];
-    let domain = closed(&res);
-    let device = Default::default();
-    let positions = filled::<Nd>(&res, &boxed(&[4.0, 4.0], &[12.0, 12.0]));
+    let (domain, positions, points) = block_in_box();
     let n = positions.len() / 2;
-    let points = Tensor::<Nd>::from_vec(positions.clone(), &[n, 2], &device).unwrap();
+    let device = points.device();
     let (u0, a) = (vec![0.7, -0.4], vec![vec![0.3, -1.1], vec![0.6, -0.2]]);
     let exact = affine_field(&positions, &u0, &a);
     let c_exact: Vec<f32> = (0..n).flat_map(|_| a.iter().flatten().copied()).collect();
