@@ -335,36 +335,56 @@ const UP_LOOKING_MAX_UNKNOWNS: usize = 3000;
 /// is faster than the up-looking one; a new pattern (a moving liquid) is cheaper without the
 /// analysis. The pattern is compared in full, so a hit is exact.
 fn seen_recently(matrix: &SparseMatrix, order: &[usize]) -> bool {
-    /// Patterns remembered per thread, as for the symbolic analyses.
-    const KEPT: usize = 4;
-    type Entry = (Vec<usize>, Vec<usize>, Vec<usize>);
     thread_local! {
-        static SEEN: std::cell::RefCell<Vec<Entry>> = const { std::cell::RefCell::new(Vec::new()) };
+        static SEEN: std::cell::RefCell<RecentPatterns<()>> =
+            const { std::cell::RefCell::new(RecentPatterns::new()) };
     }
+    let key: [&[usize]; 3] = [matrix.row_ptr(), matrix.col_indices(), order];
     SEEN.with_borrow_mut(|seen| {
-        let same = |(row_ptr, cols, seen_order): &Entry| {
-            row_ptr.as_slice() == matrix.row_ptr()
-                && cols.as_slice() == matrix.col_indices()
-                && seen_order.as_slice() == order
-        };
-        match seen.iter().position(same) {
-            Some(at) => {
-                let entry = seen.remove(at);
-                seen.insert(0, entry);
-                true
-            }
-            None => {
-                let entry = (
-                    matrix.row_ptr().to_vec(),
-                    matrix.col_indices().to_vec(),
-                    order.to_vec(),
-                );
-                seen.insert(0, entry);
-                seen.truncate(KEPT);
-                false
-            }
+        let hit = seen.get(&key).is_some();
+        if !hit {
+            seen.insert(&key, ());
         }
+        hit
     })
+}
+
+/// The values of the [`RecentPatterns::KEPT`] most recently used keys (sparsity patterns, as
+/// index arrays), most recent first: this thread's memory of the patterns it factorised. Keys
+/// are compared in full, so a hit is exact.
+struct RecentPatterns<V> {
+    entries: Vec<(Vec<Vec<usize>>, V)>,
+}
+
+impl<V: Clone> RecentPatterns<V> {
+    /// Patterns kept: a forward and an adjoint pattern, and a few regions in turn.
+    const KEPT: usize = 4;
+
+    const fn new() -> Self {
+        Self {
+            entries: Vec::new(),
+        }
+    }
+
+    /// The value of `key`, which becomes the most recent.
+    fn get(&mut self, key: &[&[usize]]) -> Option<V> {
+        let same = |(k, _): &(Vec<Vec<usize>>, V)| {
+            k.len() == key.len() && k.iter().zip(key).all(|(a, b)| a.as_slice() == *b)
+        };
+        let at = self.entries.iter().position(same)?;
+        let entry = self.entries.remove(at);
+        let value = entry.1.clone();
+        self.entries.insert(0, entry);
+        Some(value)
+    }
+
+    /// Remembers `value` for `key` as the most recent, forgetting the least recent beyond
+    /// [`Self::KEPT`].
+    fn insert(&mut self, key: &[&[usize]], value: V) {
+        let key = key.iter().map(|k| k.to_vec()).collect();
+        self.entries.insert(0, (key, value));
+        self.entries.truncate(Self::KEPT);
+    }
 }
 
 /// Below this many unknowns the factorization and solves run sequentially: spawning parallel
@@ -439,34 +459,20 @@ fn cached_symbolic(
     row_idx: &[usize],
     analyse: impl FnOnce() -> Result<SymbolicCholesky<usize>, SolveError>,
 ) -> Result<Arc<SymbolicCholesky<usize>>, SolveError> {
-    /// Patterns kept per thread: a forward and an adjoint pattern, and a few regions in turn.
-    const KEPT: usize = 4;
     const LARGEST: usize = 1 << 20;
     if row_idx.len() > LARGEST {
         return analyse().map(Arc::new);
     }
-    type Entry = (Vec<usize>, Vec<usize>, Arc<SymbolicCholesky<usize>>);
     thread_local! {
-        static RECENT: std::cell::RefCell<Vec<Entry>> = const { std::cell::RefCell::new(Vec::new()) };
+        static RECENT: std::cell::RefCell<RecentPatterns<Arc<SymbolicCholesky<usize>>>> =
+            const { std::cell::RefCell::new(RecentPatterns::new()) };
     }
-    let hit = RECENT.with_borrow_mut(|recent| {
-        let at = recent
-            .iter()
-            .position(|(c, r, _)| c.as_slice() == col_ptr && r.as_slice() == row_idx)?;
-        // Most recent first.
-        let entry = recent.remove(at);
-        let symbolic = entry.2.clone();
-        recent.insert(0, entry);
-        Some(symbolic)
-    });
-    if let Some(symbolic) = hit {
+    let key: [&[usize]; 2] = [col_ptr, row_idx];
+    if let Some(symbolic) = RECENT.with_borrow_mut(|recent| recent.get(&key)) {
         return Ok(symbolic);
     }
     let symbolic = Arc::new(analyse()?);
-    RECENT.with_borrow_mut(|recent| {
-        recent.insert(0, (col_ptr.to_vec(), row_idx.to_vec(), symbolic.clone()));
-        recent.truncate(KEPT);
-    });
+    RECENT.with_borrow_mut(|recent| recent.insert(&key, symbolic.clone()));
     Ok(symbolic)
 }
 
