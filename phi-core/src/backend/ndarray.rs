@@ -590,36 +590,36 @@ fn extrapolate_frontier(
         strides[axis] = strides[axis + 1] * grid[axis + 1];
     }
     // The 3^d box around a site, itself included: per box position `k` (row-major over the
-    // per-axis steps −1, 0, +1, axis 0 slowest), its flat offset and its step per axis.
+    // per-axis steps −1, 0, +1, axis 0 slowest), its flat offset.
     let positions = 3usize.pow(d as u32);
     let mut box_offset = vec![0isize; positions];
-    let mut box_step = vec![0i8; positions * d];
-    for k in 0..positions {
+    for (k, offset) in box_offset.iter_mut().enumerate() {
         let mut rest = k;
         for axis in (0..d).rev() {
-            let step = (rest % 3) as i8 - 1;
+            let step = (rest % 3) as isize - 1;
             rest /= 3;
-            box_step[k * d + axis] = step;
-            box_offset[k] += step as isize * strides[axis] as isize;
+            *offset += step * strides[axis] as isize;
         }
     }
-    // Which box positions of `site` lie within the grid: `inside[k]` (`index`: scratch for the
-    // site's multi-index).
-    let box_inside = |site: usize, index: &mut [usize], inside: &mut [bool]| {
-        let mut rest = site;
-        for (i, &stride) in index.iter_mut().zip(&strides) {
-            *i = rest / stride;
+    // Which box positions of `site` lie within the grid: `inside[k]`, built axis by axis (axis 0
+    // slowest, as the box positions run): each axis multiplies the entries so far by its three
+    // steps, the lower one within the grid unless the site is on the first layer, the upper one
+    // unless it is on the last.
+    let box_inside = |site: usize, inside: &mut [bool]| {
+        inside[0] = true;
+        let (mut len, mut rest) = (1, site);
+        for (&stride, &n) in strides.iter().zip(grid) {
+            let i = rest / stride;
             rest %= stride;
-        }
-        for (k, inside) in inside.iter_mut().enumerate() {
-            *inside = box_step[k * d..(k + 1) * d]
-                .iter()
-                .zip(index.iter().zip(grid))
-                .all(|(&step, (&i, &n))| match step {
-                    -1 => i > 0,
-                    1 => i + 1 < n,
-                    _ => true,
-                });
+            let within = [i > 0, true, i + 1 < n];
+            // From the back, so that entry `j` is read before `3j..3j + 3` overwrite it.
+            for j in (0..len).rev() {
+                let outer = inside[j];
+                for (s, &w) in within.iter().enumerate().rev() {
+                    inside[3 * j + s] = outer && w;
+                }
+            }
+            len *= 3;
         }
     };
     // The box sum of the gathered `values` (one per box position, 0 outside the grid) in
@@ -639,13 +639,12 @@ fn extrapolate_frontier(
     let mut queued = vec![false; sites];
     let mut frontier = Vec::new();
     let mut inside = vec![false; positions];
-    let mut index = vec![0usize; d];
-    let mut enqueue_neighbours = |site: usize,
-                                  mask: &[f32],
-                                  queued: &mut [bool],
-                                  inside: &mut [bool],
-                                  out: &mut Vec<usize>| {
-        box_inside(site, &mut index, inside);
+    let enqueue_neighbours = |site: usize,
+                              mask: &[f32],
+                              queued: &mut [bool],
+                              inside: &mut [bool],
+                              out: &mut Vec<usize>| {
+        box_inside(site, inside);
         for (&offset, &within) in box_offset.iter().zip(inside.iter()) {
             if within {
                 let nb = site.wrapping_add_signed(offset);
@@ -670,7 +669,6 @@ fn extrapolate_frontier(
     let mut count_box = vec![0.0f32; positions];
     let mut sum_box = vec![0.0f32; positions * channels];
     let mut next = Vec::new();
-    let mut at = vec![0usize; d];
     for _ in 0..cells {
         if frontier.is_empty() {
             break;
@@ -678,7 +676,7 @@ fn extrapolate_frontier(
         updates.clear();
         for &site in &frontier {
             // Gather the mask and the masked values over the box, zeros outside the grid.
-            box_inside(site, &mut at, &mut inside);
+            box_inside(site, &mut inside);
             for (k, (&offset, &within)) in box_offset.iter().zip(inside.iter()).enumerate() {
                 if within {
                     let nb = site.wrapping_add_signed(offset);
@@ -729,37 +727,38 @@ fn box_sum_in_place(data: &mut [f32], grid: &[usize], channels: usize, scratch: 
             .chunks_exact(block)
             .zip(data.chunks_exact_mut(block))
         {
-            // Rows of `inner` values along the axis; missing neighbours are zeros.
-            for i in 0..n {
-                let out = &mut dst[i * inner..(i + 1) * inner];
-                let centre = &src[i * inner..(i + 1) * inner];
-                match (i > 0, i + 1 < n) {
-                    (true, true) => {
-                        let below = &src[(i - 1) * inner..i * inner];
-                        let above = &src[(i + 1) * inner..(i + 2) * inner];
-                        for (((o, &b), &c), &a) in out.iter_mut().zip(below).zip(centre).zip(above)
-                        {
-                            *o = (b + c) + a;
-                        }
-                    }
-                    (false, true) => {
-                        let above = &src[(i + 1) * inner..(i + 2) * inner];
-                        for ((o, &c), &a) in out.iter_mut().zip(centre).zip(above) {
-                            *o = (0.0 + c) + a;
-                        }
-                    }
-                    (true, false) => {
-                        let below = &src[(i - 1) * inner..i * inner];
-                        for ((o, &b), &c) in out.iter_mut().zip(below).zip(centre) {
-                            *o = (b + c) + 0.0;
-                        }
-                    }
-                    (false, false) => {
-                        for (o, &c) in out.iter_mut().zip(centre) {
-                            *o = (0.0 + c) + 0.0;
-                        }
-                    }
+            // Rows of `inner` values along the axis; missing neighbours are zeros. The rows with
+            // both neighbours form one contiguous run, summed as one flat loop (vectorised, and
+            // cheap when `inner` is small, as along the last axis).
+            if n == 1 {
+                for (o, &c) in dst.iter_mut().zip(src) {
+                    *o = (0.0 + c) + 0.0;
                 }
+                continue;
+            }
+            let interior = (n - 2) * inner;
+            let (first, rest) = dst.split_at_mut(inner);
+            let (middle, last) = rest.split_at_mut(interior);
+            for ((o, &c), &a) in first
+                .iter_mut()
+                .zip(&src[..inner])
+                .zip(&src[inner..2 * inner])
+            {
+                *o = (0.0 + c) + a;
+            }
+            let below = &src[..interior];
+            let centre = &src[inner..inner + interior];
+            let above = &src[2 * inner..2 * inner + interior];
+            for (((o, &b), &c), &a) in middle.iter_mut().zip(below).zip(centre).zip(above) {
+                *o = (b + c) + a;
+            }
+            let end = n * inner;
+            for ((o, &b), &c) in last
+                .iter_mut()
+                .zip(&src[end - 2 * inner..end - inner])
+                .zip(&src[end - inner..end])
+            {
+                *o = (b + c) + 0.0;
             }
         }
     }
@@ -1153,7 +1152,13 @@ impl<const D: usize> FixedIndexer<D> {
     /// `min(floor(t), shape − 2)` bit for bit.
     #[inline(always)]
     fn base(&self, t: f32, axis: usize) -> (i32, f32) {
-        let b = (t as i32).min(self.highest_base[axis]);
+        // SAFETY: `t` comes from `continuous`, which clamps it into `[0, shape − 1]` (a NaN
+        // coordinate becomes 0 there, as `f32::max` returns the other operand), so it is finite
+        // and, with `new`'s check on the lattice size, representable in `i32`. The unchecked
+        // conversion then equals `t as i32`, without the saturation fix-ups that keep the lane
+        // loops from vectorising.
+        let whole: i32 = unsafe { t.to_int_unchecked() };
+        let b = whole.min(self.highest_base[axis]);
         (b, t - b as f32)
     }
 
@@ -1281,20 +1286,13 @@ impl<'a, const D: usize> ComponentSampler<'a, D> {
     #[allow(clippy::needless_range_loop)] // index loops over lanes vectorise
     fn sample_block(&self, x: &[Lane; D]) -> Lane {
         let (flat, fraction) = self.indexer.lower_corners(x);
-        let mut corners = [[0.0f32; LANES]; 8];
-        for i in 0..LANES {
-            for corner in 0..(1 << D) {
-                corners[corner][i] = self.values[flat[i] + self.offsets[corner]];
-            }
-        }
         let mut out = [0.0f32; LANES];
-        for i in 0..LANES {
-            let f: [f32; D] = std::array::from_fn(|axis| fraction[axis][i]);
-            let mut sum = 0.0f32;
-            for corner in 0..(1 << D) {
-                sum += corners[corner][i] * corner_weight::<D>(corner, &f);
+        for corner in 0..(1 << D) {
+            let offset = self.offsets[corner];
+            for i in 0..LANES {
+                let f: [f32; D] = std::array::from_fn(|axis| fraction[axis][i]);
+                out[i] += self.values[flat[i] + offset] * corner_weight::<D>(corner, &f);
             }
-            out[i] = sum;
         }
         out
     }
@@ -1416,27 +1414,31 @@ fn splat_kernel<const D: usize>(
         Transfer::Linear => {
             let offsets = corner_offsets::<D>(indexer);
             let n = p.len() / D;
-            let mut flats = vec![0usize; n];
-            let mut fractions = vec![[0.0f32; D]; n];
-            for_each_block::<D>(p, |first, x, count| {
+            // First the stencils, block by block (vectorised): each point's lower corner and its
+            // weight per corner (`corner_weights[corner][point]`). Then the adds, corner-major.
+            let mut flats = Vec::with_capacity(n);
+            let mut corner_weights: Vec<Vec<f32>> =
+                (0..1 << D).map(|_| Vec::with_capacity(n)).collect();
+            for_each_block::<D>(p, |_, x, count| {
                 let (flat, fraction) = fixed.lower_corners(x);
-                flats[first..first + count].copy_from_slice(&flat[..count]);
-                for (i, f) in fractions[first..first + count].iter_mut().enumerate() {
-                    *f = std::array::from_fn(|axis| fraction[axis][i]);
+                flats.extend_from_slice(&flat[..count]);
+                for (corner, out) in corner_weights.iter_mut().enumerate() {
+                    let w: Lane = std::array::from_fn(|i| {
+                        corner_weight::<D>(corner, &std::array::from_fn(|axis| fraction[axis][i]))
+                    });
+                    out.extend_from_slice(&w[..count]);
                 }
             });
-            for (corner, &offset) in offsets.iter().enumerate().take(1 << D) {
-                let stencils = flats.iter().zip(&fractions);
+            for (&offset, corner_weights) in offsets.iter().zip(&corner_weights) {
+                let stencils = flats.iter().zip(corner_weights);
                 if c == 1 {
                     // One channel (a staggered component): no row slices.
-                    for ((&flat, fraction), &x) in stencils.zip(v) {
-                        let weight = corner_weight::<D>(corner, fraction);
+                    for ((&flat, &weight), &x) in stencils.zip(v) {
                         sums[flat + offset] += x * weight;
                         weights[flat + offset] += weight;
                     }
                 } else {
-                    for ((&flat, fraction), value) in stencils.zip(v.chunks_exact(c)) {
-                        let weight = corner_weight::<D>(corner, fraction);
+                    for ((&flat, &weight), value) in stencils.zip(v.chunks_exact(c)) {
                         add(sums, weights, flat + offset, value, weight);
                     }
                 }
@@ -1627,25 +1629,26 @@ fn rows_of<T>(t: &Tensor<T>, len: usize) -> &[T] {
 
 /// `f(x, y)` for each row of `rows` (row-major, rows of `inner`) against the one row `y`.
 fn zip_rows<T: Copy, U>(rows: &[T], y: &[T], inner: usize, f: impl Fn(T, T) -> U) -> Vec<U> {
-    fn fixed<T: Copy, U, const K: usize>(rows: &[T], y: &[T], f: impl Fn(T, T) -> U) -> Vec<U> {
-        let y: [T; K] = std::array::from_fn(|k| y[k]);
-        // An exact-length iterator: collected without per-element capacity checks.
-        rows.iter()
-            .enumerate()
-            .map(|(i, &x)| f(x, y[i % K]))
-            .collect()
+    if inner == 0 {
+        return Vec::new();
     }
-    match inner {
-        2 => fixed::<T, U, 2>(rows, y, f),
-        3 => fixed::<T, U, 3>(rows, y, f),
-        _ => {
-            let mut out = Vec::with_capacity(rows.len());
-            for row in rows.chunks_exact(inner) {
-                out.extend(row.iter().zip(y).map(|(&x, &y)| f(x, y)));
-            }
-            out
-        }
+    // Short rows (point coordinates) are repeated into a pattern of at least 16 values, so that
+    // each chunk is one long loop over two slices, which the compiler vectorises.
+    let pattern: Vec<T> = y
+        .iter()
+        .copied()
+        .cycle()
+        .take(inner * 16usize.div_ceil(inner))
+        .collect();
+    let mut out = Vec::with_capacity(rows.len());
+    let mut chunks = rows.chunks_exact(pattern.len());
+    for chunk in &mut chunks {
+        out.extend(chunk.iter().zip(&pattern).map(|(&x, &y)| f(x, y)));
     }
+    // A whole number of rows: the pattern lines up with it as with every chunk.
+    let rest = chunks.remainder();
+    out.extend(rest.iter().zip(&pattern).map(|(&x, &y)| f(x, y)));
+    out
 }
 
 // -------------------------------------------------------------------- matmul

@@ -547,26 +547,40 @@ pub fn occupied_cells_from_host<B: Backend>(
             ),
         });
     }
-    let inverse: Vec<f32> = lattice.spacing.iter().map(|s| 1.0 / s).collect();
-    let upper: Vec<f32> = lattice.shape.iter().map(|&s| (s - 1) as f32).collect();
-    let strides = lattice.strides();
     let mut mask = vec![0.0f32; domain.cell_count()];
-    for point in points.chunks_exact(d) {
-        let mut flat = 0usize;
-        for axis in 0..d {
-            // As `continuous_indices` and `nearest_stencil`: clamp, round half up, clamp.
-            // `max` also maps NaN to 0. The index is then ≥ 0, so truncation is `floor`.
-            let index = ((point[axis] - lattice.origin[axis]) * inverse[axis])
-                .max(0.0)
-                .min(upper[axis]);
-            let nearest = ((index + 0.5) as usize).min(lattice.shape[axis] - 1);
-            flat += nearest * strides[axis] as usize;
-        }
-        mask[flat] = 1.0;
+    match d {
+        1 => mark_nearest_cells::<1>(&lattice, points, &mut mask),
+        2 => mark_nearest_cells::<2>(&lattice, points, &mut mask),
+        3 => mark_nearest_cells::<3>(&lattice, points, &mut mask),
+        _ => unreachable!("domains have one to three dimensions"),
     }
     let mut shape = domain.resolution().to_vec();
     shape.push(1);
     CenteredGrid::new(Tensor::from_vec(mask, &shape, device)?, domain.clone())
+}
+
+/// Sets `mask` to 1 at the cell nearest to each of `points [N, D]` (row-major) on the cell-centre
+/// `lattice`: [`occupied_cells_from_host`]'s loop, with the axes unrolled.
+fn mark_nearest_cells<const D: usize>(lattice: &SampleLattice, points: &[f32], mask: &mut [f32]) {
+    let origin: [f32; D] = std::array::from_fn(|axis| lattice.origin[axis]);
+    let inverse: [f32; D] = std::array::from_fn(|axis| 1.0 / lattice.spacing[axis]);
+    let upper: [f32; D] = std::array::from_fn(|axis| (lattice.shape[axis] - 1) as f32);
+    let last: [usize; D] = std::array::from_fn(|axis| lattice.shape[axis] - 1);
+    let strides = lattice.strides();
+    let strides: [usize; D] = std::array::from_fn(|axis| strides[axis] as usize);
+    for point in points.chunks_exact(D) {
+        let mut flat = 0usize;
+        for axis in 0..D {
+            // As `continuous_indices` and `nearest_stencil`: clamp, round half up, clamp.
+            // `max` also maps NaN to 0. The index is then ≥ 0, so truncation is `floor`.
+            let index = ((point[axis] - origin[axis]) * inverse[axis])
+                .max(0.0)
+                .min(upper[axis]);
+            let nearest = ((index + 0.5) as usize).min(last[axis]);
+            flat += nearest * strides[axis];
+        }
+        mask[flat] = 1.0;
+    }
 }
 
 /// The faces whose transfer weight is positive (the `weights` of [`particles_to_staggered`]), as
