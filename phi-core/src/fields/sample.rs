@@ -576,7 +576,9 @@ fn mark_nearest_cells<const D: usize>(lattice: &SampleLattice, points: &[f32], m
             let index = ((point[axis] - origin[axis]) * inverse[axis])
                 .max(0.0)
                 .min(upper[axis]);
-            let nearest = ((index + 0.5) as usize).min(last[axis]);
+            // Through `i64`, which converts in one instruction (`usize` needs a fix-up for
+            // values beyond `i64::MAX`, which cannot occur here: the index is at most shape − ½).
+            let nearest = ((index + 0.5) as i64 as usize).min(last[axis]);
             flat += nearest * strides[axis];
         }
         mask[flat] = 1.0;

@@ -192,6 +192,29 @@ impl SparseMatrix {
         Ok(Self::from_parts(nrows, ncols, row_ptr, col_indices, values))
     }
 
+    /// [`from_csr`](Self::from_csr) for rows assembled by this crate, whose structure is right by
+    /// construction (checked in debug builds): only the values are checked.
+    ///
+    /// # Errors
+    /// [`SolveError::NonFinite`] for a NaN or infinite value.
+    pub(crate) fn from_assembled_csr(
+        nrows: usize,
+        ncols: usize,
+        row_ptr: Vec<usize>,
+        col_indices: Vec<usize>,
+        values: Vec<f64>,
+    ) -> Result<Self, SolveError> {
+        if cfg!(debug_assertions) {
+            return Self::from_csr(nrows, ncols, row_ptr, col_indices, values);
+        }
+        if let Some(k) = values.iter().position(|v| !v.is_finite()) {
+            return Err(SolveError::NonFinite {
+                what: format!("matrix value {k}"),
+            });
+        }
+        Ok(Self::from_parts(nrows, ncols, row_ptr, col_indices, values))
+    }
+
     /// A dense row-major matrix's non-zero entries as a sparse matrix (for tests and small
     /// systems).
     ///
