@@ -1278,10 +1278,9 @@ impl<'a, const D: usize> ComponentSampler<'a, D> {
     }
 
     /// The values at a block of points `x` (coordinate-major: `x[axis][point]`), each as
-    /// [`sample_kernel`] computes it with one channel, in three passes over the block: the
-    /// lower corners and fractions ([`FixedIndexer::lower_corners`], vectorised); the `2^D`
-    /// corner values (scalar loads); the tent weights and the weighted sum over the corners
-    /// (vectorised).
+    /// [`sample_kernel`] computes it with one channel: first the lower corners and fractions of
+    /// the whole block ([`FixedIndexer::lower_corners`], vectorised), then corner by corner the
+    /// scalar loads, the tent weights and the running sums, in the composite's corner order.
     #[inline(always)]
     #[allow(clippy::needless_range_loop)] // index loops over lanes vectorise
     fn sample_block(&self, x: &[Lane; D]) -> Lane {
@@ -1291,7 +1290,14 @@ impl<'a, const D: usize> ComponentSampler<'a, D> {
             let offset = self.offsets[corner];
             for i in 0..LANES {
                 let f: [f32; D] = std::array::from_fn(|axis| fraction[axis][i]);
-                out[i] += self.values[flat[i] + offset] * corner_weight::<D>(corner, &f);
+                let at = flat[i] + offset;
+                debug_assert!(at < self.values.len());
+                // SAFETY: along each axis the lower corner is at most `max(shape − 2, 0)`
+                // (`FixedIndexer::base`), and a corner's offset steps one sample further only
+                // along axes with more than one sample, so `at ≤ Σ (shape − 1) · stride =
+                // samples − 1`; `new` checked that `values` holds `samples` values.
+                let value = unsafe { *self.values.get_unchecked(at) };
+                out[i] += value * corner_weight::<D>(corner, &f);
             }
         }
         out
@@ -1433,9 +1439,18 @@ fn splat_kernel<const D: usize>(
                 let stencils = flats.iter().zip(corner_weights);
                 if c == 1 {
                     // One channel (a staggered component): no row slices.
+                    let samples: usize = indexer.shape.iter().product();
+                    assert!(sums.len() == samples && weights.len() == samples);
                     for ((&flat, &weight), &x) in stencils.zip(v) {
-                        sums[flat + offset] += x * weight;
-                        weights[flat + offset] += weight;
+                        let at = flat + offset;
+                        debug_assert!(at < samples);
+                        // SAFETY: `at` is a corner of a lower corner from `lower_corners`, at
+                        // most `samples − 1` (see `ComponentSampler::sample_block`), and both
+                        // arrays hold `samples` values (checked above).
+                        unsafe {
+                            *sums.get_unchecked_mut(at) += x * weight;
+                            *weights.get_unchecked_mut(at) += weight;
+                        }
                     }
                 } else {
                     for ((&flat, &weight), value) in stencils.zip(v.chunks_exact(c)) {
