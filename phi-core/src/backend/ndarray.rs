@@ -1435,12 +1435,12 @@ fn splat_kernel<const D: usize>(
                     out.extend_from_slice(&w[..count]);
                 }
             });
+            let samples: usize = indexer.shape.iter().product();
+            assert!(sums.len() == samples * c && weights.len() == samples);
             for (&offset, corner_weights) in offsets.iter().zip(&corner_weights) {
                 let stencils = flats.iter().zip(corner_weights);
                 if c == 1 {
                     // One channel (a staggered component): no row slices.
-                    let samples: usize = indexer.shape.iter().product();
-                    assert!(sums.len() == samples && weights.len() == samples);
                     for ((&flat, &weight), &x) in stencils.zip(v) {
                         let at = flat + offset;
                         debug_assert!(at < samples);
@@ -1587,7 +1587,7 @@ fn strided_zip<T: Copy, U>(
 ) -> Vec<U> {
     let (cshape, strides) = collapse(shape, [strides_in(a, shape), strides_in(b, shape)]);
     // One row-major operand against one row repeated (a `[1, k]` bias or bound against points
-    // `[N, k]`): whole rows at a time, unrolled for the short rows of point coordinates.
+    // `[N, k]`): long loops against the row repeated (`zip_rows`).
     if let ([outer, inner], [sa, sb]) = (&cshape[..], &strides) {
         let (outer, inner) = (*outer, *inner);
         let row = [inner as isize, 1];

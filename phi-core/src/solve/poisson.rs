@@ -210,15 +210,6 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
     }
     let n = unknown_to_cell.len();
 
-    let open_side: Vec<[bool; 2]> = (0..d)
-        .map(|axis| domain.boundaries()[axis].map(|side| side == Boundary::Open))
-        .collect();
-    let grid = GridFaces {
-        resolution,
-        face_open,
-        open_side: &open_side,
-        coefficients: &coefficients,
-    };
     let Rows {
         row_ptr,
         col_indices,
@@ -226,9 +217,9 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
         diagonal_at,
         anchored,
     } = match d {
-        1 => assemble_rows::<1, W, F>(&grid, &cell_to_unknown, n),
-        2 => assemble_rows::<2, W, F>(&grid, &cell_to_unknown, n),
-        3 => assemble_rows::<3, W, F>(&grid, &cell_to_unknown, n),
+        1 => assemble_rows::<1, W, F>(domain, face_open, &coefficients, &cell_to_unknown, n),
+        2 => assemble_rows::<2, W, F>(domain, face_open, &coefficients, &cell_to_unknown, n),
+        3 => assemble_rows::<3, W, F>(domain, face_open, &coefficients, &cell_to_unknown, n),
         _ => unreachable!("domains have one to three dimensions"),
     };
 
@@ -291,15 +282,6 @@ pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
     })
 }
 
-/// What [`assemble_rows`] reads of the domain: its resolution, the face weights per axis (one
-/// per face of the staggered layout), whether each side is open, and `1/h²` per axis.
-struct GridFaces<'a, F> {
-    resolution: &'a [usize],
-    face_open: &'a [F],
-    open_side: &'a [[bool; 2]],
-    coefficients: &'a [f64],
-}
-
 /// The CSR rows of the Poisson matrix (before pinning), the position of each row's diagonal
 /// entry, and whether each unknown reaches air or an open side.
 struct Rows {
@@ -315,17 +297,16 @@ struct Rows {
 /// axis 0 to D−1 (strides decreasing), the diagonal, then upper neighbours from axis D−1 to 0.
 /// The diagonal sums its face terms axis by axis, lower face before upper.
 fn assemble_rows<const D: usize, W: Weight, F: AsRef<[W]>>(
-    grid: &GridFaces<'_, F>,
+    domain: &Domain,
+    face_open: &[F],
+    coefficients: &[f64],
     cell_to_unknown: &[Option<usize>],
     n: usize,
 ) -> Rows {
-    let resolution: [usize; D] = std::array::from_fn(|axis| grid.resolution[axis]);
-    let row_major = |shape: [usize; D]| {
-        let mut strides = [1usize; D];
-        for axis in (0..D.saturating_sub(1)).rev() {
-            strides[axis] = strides[axis + 1] * shape[axis + 1];
-        }
-        strides
+    let resolution: [usize; D] = std::array::from_fn(|axis| domain.resolution()[axis]);
+    let row_major = |shape: [usize; D]| -> [usize; D] {
+        let strides = strides(&shape);
+        std::array::from_fn(|axis| strides[axis])
     };
     let cell_strides = row_major(resolution);
     // The faces of `axis` lie on the cells' grid with one more layer along `axis`; the lower
@@ -335,9 +316,10 @@ fn assemble_rows<const D: usize, W: Weight, F: AsRef<[W]>>(
         shape[axis] += 1;
         row_major(shape)
     });
-    let faces: [&[W]; D] = std::array::from_fn(|axis| grid.face_open[axis].as_ref());
-    let open_side: [[bool; 2]; D] = std::array::from_fn(|axis| grid.open_side[axis]);
-    let coefficients: [f64; D] = std::array::from_fn(|axis| grid.coefficients[axis]);
+    let faces: [&[W]; D] = std::array::from_fn(|axis| face_open[axis].as_ref());
+    let open_side: [[bool; 2]; D] =
+        std::array::from_fn(|axis| domain.boundaries()[axis].map(|side| side == Boundary::Open));
+    let coefficients: [f64; D] = std::array::from_fn(|axis| coefficients[axis]);
 
     let mut rows = Rows {
         row_ptr: Vec::with_capacity(n + 1),

@@ -184,11 +184,7 @@ impl SparseMatrix {
                 ));
             }
         }
-        if let Some(k) = values.iter().position(|v| !v.is_finite()) {
-            return Err(SolveError::NonFinite {
-                what: format!("matrix value {k}"),
-            });
-        }
+        check_finite(&values)?;
         Ok(Self::from_parts(nrows, ncols, row_ptr, col_indices, values))
     }
 
@@ -207,11 +203,7 @@ impl SparseMatrix {
         if cfg!(debug_assertions) {
             return Self::from_csr(nrows, ncols, row_ptr, col_indices, values);
         }
-        if let Some(k) = values.iter().position(|v| !v.is_finite()) {
-            return Err(SolveError::NonFinite {
-                what: format!("matrix value {k}"),
-            });
-        }
+        check_finite(&values)?;
         Ok(Self::from_parts(nrows, ncols, row_ptr, col_indices, values))
     }
 
@@ -415,6 +407,16 @@ impl SparseMatrix {
 
     pub(super) fn count_factorization(&self) {
         self.factorizations.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// [`SolveError::NonFinite`] naming the first NaN or infinite value of a matrix's `values`.
+fn check_finite(values: &[f64]) -> Result<(), SolveError> {
+    match values.iter().position(|v| !v.is_finite()) {
+        Some(k) => Err(SolveError::NonFinite {
+            what: format!("matrix value {k}"),
+        }),
+        None => Ok(()),
     }
 }
 
