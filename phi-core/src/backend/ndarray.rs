@@ -1117,6 +1117,9 @@ struct FixedIndexer<const D: usize> {
     /// `max(shape − 2, 0)` as an integer: the highest lower corner.
     highest_base: [i32; D],
     strides: [usize; D],
+    /// `strides` in `i32`, for the vectorised lower corners: a lattice has at most `i32::MAX`
+    /// samples (checked in `new`), so every flat index fits.
+    strides_i32: [i32; D],
 }
 
 impl<const D: usize> FixedIndexer<D> {
@@ -1133,6 +1136,7 @@ impl<const D: usize> FixedIndexer<D> {
             upper: pick(&indexer.upper),
             highest_base: std::array::from_fn(|axis| indexer.highest_base[axis] as i32),
             strides: std::array::from_fn(|axis| indexer.strides[axis]),
+            strides_i32: std::array::from_fn(|axis| indexer.strides[axis] as i32),
         }
     }
 
@@ -1179,26 +1183,23 @@ impl<const D: usize> FixedIndexer<D> {
 
     /// [`lower_corner`](Self::lower_corner) of a block of points `x` (coordinate-major:
     /// `x[axis][point]`): the flat lower corners and the fractions (`fraction[axis][point]`).
-    /// The arithmetic runs lane by lane over the block, which the compiler vectorises.
+    /// The arithmetic runs lane by lane over the block, which the compiler vectorises; the flat
+    /// indices are summed in 32-bit lanes (a lattice has at most `i32::MAX` samples, checked in
+    /// `new`), as 64-bit multiplications would not vectorise.
     #[inline(always)]
     #[allow(clippy::needless_range_loop)] // index loops over lanes vectorise
-    fn lower_corners(&self, x: &[Lane; D]) -> ([usize; LANES], [Lane; D]) {
+    fn lower_corners(&self, x: &[Lane; D]) -> ([u32; LANES], [Lane; D]) {
         let mut fraction = [[0.0f32; LANES]; D];
-        let mut base = [[0i32; LANES]; D];
+        let mut flat = [0i32; LANES];
         for axis in 0..D {
             for i in 0..LANES {
                 let (b, f) = self.base(self.continuous(x[axis][i], axis), axis);
-                base[axis][i] = b;
+                flat[i] += b * self.strides_i32[axis];
                 fraction[axis][i] = f;
             }
         }
-        let mut flat = [0usize; LANES];
-        for i in 0..LANES {
-            for axis in 0..D {
-                flat[i] += base[axis][i] as usize * self.strides[axis];
-            }
-        }
-        (flat, fraction)
+        // Non-negative: every lower corner and stride is.
+        (flat.map(|f| f as u32), fraction)
     }
 }
 
@@ -1290,7 +1291,7 @@ impl<'a, const D: usize> ComponentSampler<'a, D> {
             let offset = self.offsets[corner];
             for i in 0..LANES {
                 let f: [f32; D] = std::array::from_fn(|axis| fraction[axis][i]);
-                let at = flat[i] + offset;
+                let at = flat[i] as usize + offset;
                 debug_assert!(at < self.values.len());
                 // SAFETY: along each axis the lower corner is at most `max(shape − 2, 0)`
                 // (`FixedIndexer::base`), and a corner's offset steps one sample further only
@@ -1442,7 +1443,7 @@ fn splat_kernel<const D: usize>(
                 if c == 1 {
                     // One channel (a staggered component): no row slices.
                     for ((&flat, &weight), &x) in stencils.zip(v) {
-                        let at = flat + offset;
+                        let at = flat as usize + offset;
                         debug_assert!(at < samples);
                         // SAFETY: `at` is a corner of a lower corner from `lower_corners`, at
                         // most `samples − 1` (see `ComponentSampler::sample_block`), and both
@@ -1454,7 +1455,7 @@ fn splat_kernel<const D: usize>(
                     }
                 } else {
                     for ((&flat, &weight), value) in stencils.zip(v.chunks_exact(c)) {
-                        add(sums, weights, flat + offset, value, weight);
+                        add(sums, weights, flat as usize + offset, value, weight);
                     }
                 }
             }
