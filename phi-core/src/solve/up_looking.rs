@@ -191,28 +191,22 @@ impl UpLookingCholesky {
 ///
 /// # Safety
 /// Every entry of `cols` must index `x` (asserted in debug builds). This is the factorization's
-/// inner loop, and a bounds check on each gather costs a third of its instructions.
+/// inner loop, and the bounds check on each gather was about a fifth of its instructions.
 unsafe fn sparse_dot(cols: &[u32], values: &[f64], x: &[f64]) -> f64 {
-    debug_assert_eq!(cols.len(), values.len());
     debug_assert!(cols.iter().all(|&c| (c as usize) < x.len()));
-    let len = cols.len().min(values.len());
-    // SAFETY: `q < len`, within both `cols` and `values`; every column indexes `x` (the
-    // function's contract).
-    let term = |q: usize| unsafe {
-        *values.get_unchecked(q) * *x.get_unchecked(*cols.get_unchecked(q) as usize)
-    };
+    // SAFETY: the function's contract: every column indexes `x`.
+    let gather = |c: u32| unsafe { *x.get_unchecked(c as usize) };
     let mut sums = [0.0f64; 4];
-    let mut q = 0;
-    while q + 4 <= len {
-        for (lane, sum) in sums.iter_mut().enumerate() {
-            *sum += term(q + lane);
+    let mut col_chunks = cols.chunks_exact(4);
+    let mut value_chunks = values.chunks_exact(4);
+    for (c, v) in (&mut col_chunks).zip(&mut value_chunks) {
+        for lane in 0..4 {
+            sums[lane] += v[lane] * gather(c[lane]);
         }
-        q += 4;
     }
     let mut tail = 0.0;
-    while q < len {
-        tail += term(q);
-        q += 1;
+    for (&c, &v) in col_chunks.remainder().iter().zip(value_chunks.remainder()) {
+        tail += v * gather(c);
     }
     (sums[0] + sums[1]) + (sums[2] + sums[3]) + tail
 }
