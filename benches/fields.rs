@@ -66,6 +66,10 @@ fn bench_backend<B: Backend>(c: &mut Criterion) {
                 " cg-ic0",
                 SolveMethod::ConjugateGradient(Preconditioner::IncompleteCholesky),
             ));
+            methods.push((
+                " cg-mic0",
+                SolveMethod::ConjugateGradient(Preconditioner::ModifiedIncompleteCholesky),
+            ));
             if d == 2 {
                 methods.push((" cholesky", SolveMethod::Cholesky));
             }

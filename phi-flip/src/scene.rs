@@ -176,7 +176,8 @@ pub struct SolverSpec {
     /// Iteration limit of conjugate gradients (default 1000).
     #[serde(default = "default_iterations")]
     pub max_iterations: usize,
-    /// `"auto"`, `"cg"` or `"cholesky"`.
+    /// `"auto"` (MIC(0) conjugate gradients for the pressure), `"cg"` (the same, named) or
+    /// `"cholesky"` (a direct solve, exact to rounding).
     #[serde(default = "default_method")]
     pub method: String,
 }
@@ -376,7 +377,7 @@ impl Scene {
         let solver = &self.solver;
         let method = match solver.method.as_str() {
             "auto" => SolveMethod::Auto,
-            "cg" => SolveMethod::ConjugateGradient(Preconditioner::IncompleteCholesky),
+            "cg" => SolveMethod::ConjugateGradient(Preconditioner::ModifiedIncompleteCholesky),
             "cholesky" => SolveMethod::Cholesky,
             other => {
                 return Err(error(

@@ -34,8 +34,8 @@ pub struct FlipParams {
     /// nearest-face mean.
     pub transfer: Transfer,
     /// Pressure solve options (default: relative tolerance `1e-5`, at most 1000 iterations, the
-    /// method chosen by [`SolveMethod::Auto`](phi_core::solve::SolveMethod::Auto): Cholesky in 2D,
-    /// IC(0)-preconditioned CG in 3D).
+    /// method chosen by [`SolveMethod::Auto`](phi_core::solve::SolveMethod::Auto): MIC(0)
+    /// conjugate gradients for the pressure's Poisson matrix in 2D and 3D).
     pub solve: SolveOptions,
     /// How far beyond an obstacle's surface pushed particles are placed (domain units; the
     /// thesis code uses 0).

@@ -14,6 +14,7 @@ use faer::sparse::linalg::solvers::{Llt, Lu};
 use faer::sparse::{SparseColMat, SparseColMatRef, SymbolicSparseColMatRef, Triplet};
 use faer::{Conj, Mat, Par, Side};
 
+use super::mic::{ModifiedIncompleteCholesky, SplitMatrix};
 use super::sparse::SparseMatrix;
 use super::up_looking::UpLookingCholesky;
 use super::{Preconditioner, SolveError, SolveMethod, SolveOptions, SolveStats};
@@ -187,13 +188,22 @@ fn solve_impl(
         for i in 0..n {
             column[i] = rhs[i * columns + c];
         }
-        let (x, iterations) = match method {
+        // Conjugate gradients return the residual they confirmed from the solution; the direct
+        // methods' is computed here.
+        let (x, iterations, residual) = match method {
             SolveMethod::ConjugateGradient(pre) => pcg(system, matrix, &column, options, pre)?,
-            SolveMethod::Cholesky => (cholesky(matrix)?.solve(&column), 0),
-            SolveMethod::Lu => (lu(matrix)?.solve(&column, transpose), 0),
+            SolveMethod::Cholesky => {
+                let x = cholesky(matrix)?.solve(&column);
+                let residual = residual_norm(system, &x, &column);
+                (x, 0, residual)
+            }
+            SolveMethod::Lu => {
+                let x = lu(matrix)?.solve(&column, transpose);
+                let residual = residual_norm(system, &x, &column);
+                (x, 0, residual)
+            }
             SolveMethod::Auto => unreachable!("resolved above"),
         };
-        let residual = residual_norm(system, &x, &column);
         if !residual.is_finite() || x.iter().any(|v| !v.is_finite()) {
             return Err(SolveError::NonFinite {
                 what: "the solution".into(),
@@ -224,10 +234,17 @@ fn resolve_method(matrix: &SparseMatrix, requested: SolveMethod) -> SolveMethod 
     if !matrix.is_symmetric() {
         return SolveMethod::Lu;
     }
-    // Up to 5.5 entries per row: a 1-d or 2-d stencil, whose sparse Cholesky factor stays small
-    // (nested-dissection-like fill, n log n), and factorising beats iterating even for a matrix used
-    // once. More: a 3-d stencil (7 points), whose factor fills in heavily; use IC(0) CG. The test
-    // is structural, so choosing costs nothing (a symbolic analysis to measure the fill costs as
+    // A stencil M-matrix (Poisson matrices in any dimension): MIC(0) conjugate gradients. On the
+    // pressure systems of a 64² FLIP step it beats the sparse Cholesky factorization (21.6
+    // iterations against a factorization of ~450k multiply-adds), level at 32², and in 3-d it
+    // needs 15 iterations where IC(0) needs 19.
+    if matrix.is_stencil_m_matrix() {
+        return SolveMethod::ConjugateGradient(Preconditioner::ModifiedIncompleteCholesky);
+    }
+    // Up to 5.5 entries per row: a 1-d or 2-d pattern, whose sparse Cholesky factor stays small
+    // (nested-dissection-like fill, n log n), and factorising beats iterating even for a matrix
+    // used once. More: a 3-d pattern, whose factor fills in heavily; use IC(0) CG. The test is
+    // structural, so choosing costs nothing (a symbolic analysis to measure the fill costs as
     // much as the factorization of a fresh matrix).
     if matrix.nnz() as f64 <= 5.5 * matrix.nrows().max(1) as f64 {
         SolveMethod::Cholesky
@@ -240,8 +257,23 @@ fn threshold(options: &SolveOptions, rhs_norm: f64) -> f64 {
     (options.relative_tolerance * rhs_norm).max(options.absolute_tolerance)
 }
 
+/// Independent partial sums of [`dot`]: a single running sum would chain every addition on
+/// the previous one.
+const LANES: usize = 8;
+
+/// `aᵀ b`, summed in [`LANES`] interleaved partial sums.
 fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
+    let mut sums = [0.0; LANES];
+    let (a_chunks, b_chunks) = (a.chunks_exact(LANES), b.chunks_exact(LANES));
+    for (&a, &b) in a_chunks.remainder().iter().zip(b_chunks.remainder()) {
+        sums[0] += a * b;
+    }
+    for (a, b) in a_chunks.zip(b_chunks) {
+        for k in 0..LANES {
+            sums[k] += a[k] * b[k];
+        }
+    }
+    sums.iter().sum()
 }
 
 fn norm(a: &[f64]) -> f64 {
@@ -673,6 +705,7 @@ enum Precond {
     Identity,
     Jacobi(Vec<f64>),
     Ic(Arc<IncompleteCholesky>),
+    Mic(Arc<ModifiedIncompleteCholesky>),
 }
 
 impl Precond {
@@ -685,6 +718,7 @@ impl Precond {
                 }
             }
             Precond::Ic(ic) => ic.apply(r, z),
+            Precond::Mic(mic) => mic.apply(r, z),
         }
     }
 }
@@ -719,27 +753,53 @@ fn preconditioner(matrix: &SparseMatrix, kind: Preconditioner) -> Result<Precond
                 None => jacobi(matrix),
             }
         }
+        Preconditioner::ModifiedIncompleteCholesky => {
+            let mic = matrix
+                .mic0
+                .get_or_init(|| {
+                    matrix.count_factorization();
+                    ModifiedIncompleteCholesky::new(matrix).map(Arc::new)
+                })
+                .clone();
+            match mic {
+                Some(mic) => Ok(Precond::Mic(mic)),
+                None => jacobi(matrix),
+            }
+        }
     }
 }
 
 /// Preconditioned conjugate gradients from `x = 0` on `system` (symmetric: `system` is
-/// `matrix`, whose caches hold the preconditioner). Returns the solution and the iterations.
+/// `matrix`, whose caches hold the preconditioner and the product's layout). Returns the solution,
+/// the iterations and the residual `‖b − A x‖₂` computed from the solution.
 fn pcg(
     system: &SparseMatrix,
     matrix: &SparseMatrix,
     b: &[f64],
     options: &SolveOptions,
     kind: Preconditioner,
-) -> Result<(Vec<f64>, usize), SolveError> {
+) -> Result<(Vec<f64>, usize, f64), SolveError> {
     let n = b.len();
     let mut x = vec![0.0; n];
     let tolerance = threshold(options, norm(b));
     let mut r = b.to_vec();
     let mut residual = norm(&r);
     if residual <= tolerance {
-        return Ok((x, 0));
+        return Ok((x, 0, residual));
     }
     let precond = preconditioner(matrix, kind)?;
+    let split = if std::ptr::eq(system, matrix) {
+        matrix
+            .split
+            .get_or_init(|| SplitMatrix::new(matrix).map(Arc::new))
+            .clone()
+    } else {
+        None
+    };
+    let product = |x: &[f64], y: &mut [f64]| match &split {
+        Some(split) => split.mul_vec_into(x, y),
+        None => system.mul_vec_into(x, y),
+    };
     let mut z = vec![0.0; n];
     let mut q = vec![0.0; n];
     precond.apply(&r, &mut z);
@@ -748,7 +808,7 @@ fn pcg(
     let mut iterations = 0;
     while iterations < options.max_iterations {
         iterations += 1;
-        system.mul_vec_into(&p, &mut q);
+        product(&p, &mut q);
         let pq = dot(&p, &q);
         if !pq.is_finite() || !rz.is_finite() {
             return Err(SolveError::NonFinite {
@@ -764,20 +824,16 @@ fn pcg(
             });
         }
         let alpha = rz / pq;
-        for i in 0..n {
-            x[i] += alpha * p[i];
-            r[i] -= alpha * q[i];
-        }
-        residual = norm(&r);
+        residual = update_and_norm(alpha, &p, &q, &mut x, &mut r);
         if residual <= tolerance {
             // The recursive residual drifts from the true one; confirm, else restart from it.
-            let true_residual = residual_norm(system, &x, b);
-            if true_residual <= tolerance {
-                return Ok((x, iterations));
-            }
-            system.mul_vec_into(&x, &mut q);
+            product(&x, &mut q);
             for i in 0..n {
                 r[i] = b[i] - q[i];
+            }
+            let true_residual = norm(&r);
+            if true_residual <= tolerance {
+                return Ok((x, iterations, true_residual));
             }
             residual = true_residual;
             precond.apply(&r, &mut z);
@@ -789,8 +845,8 @@ fn pcg(
         let rz_next = dot(&r, &z);
         let beta = rz_next / rz;
         rz = rz_next;
-        for i in 0..n {
-            p[i] = z[i] + beta * p[i];
+        for (p, z) in p.iter_mut().zip(&z) {
+            *p = z + beta * *p;
         }
     }
     Err(SolveError::NotConverged {
@@ -798,6 +854,15 @@ fn pcg(
         residual,
         tolerance,
     })
+}
+
+/// `x += α p`, `r −= α q`; returns `‖r‖₂`.
+fn update_and_norm(alpha: f64, p: &[f64], q: &[f64], x: &mut [f64], r: &mut [f64]) -> f64 {
+    for ((x, r), (p, q)) in x.iter_mut().zip(r.iter_mut()).zip(p.iter().zip(q)) {
+        *x += alpha * p;
+        *r -= alpha * q;
+    }
+    norm(r)
 }
 
 /// The adjoint solve of a backward pass, `Aᵀ y = g`, for `f32` gradients: first with `options`;

@@ -5,6 +5,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};
 
 use super::SolveError;
+use super::mic::{ModifiedIncompleteCholesky, SplitMatrix};
 use super::native::{CholeskyFactor, IncompleteCholesky, LuFactor};
 
 /// A sparse matrix in compressed sparse row (CSR) form with `f64` values.
@@ -20,10 +21,14 @@ pub struct SparseMatrix {
     col_indices: Vec<usize>,
     values: Vec<f64>,
     symmetric: OnceLock<bool>,
+    stencil_m_matrix: OnceLock<bool>,
     transpose: OnceLock<Arc<SparseMatrix>>,
     pub(super) cholesky: OnceLock<Result<Arc<CholeskyFactor>, SolveError>>,
     pub(super) lu: OnceLock<Result<Arc<LuFactor>, SolveError>>,
     pub(super) ic0: OnceLock<Option<Arc<IncompleteCholesky>>>,
+    pub(super) mic0: OnceLock<Option<Arc<ModifiedIncompleteCholesky>>>,
+    /// The layout of the conjugate-gradient product, where the rows fit it.
+    pub(super) split: OnceLock<Option<Arc<SplitMatrix>>>,
     /// A fill-reducing elimination order for the Cholesky factorization (see
     /// [`SparseMatrix::with_ordering`]); `None`: faer computes an AMD ordering.
     pub(super) ordering: Option<Arc<[usize]>>,
@@ -82,10 +87,13 @@ impl SparseMatrix {
             col_indices,
             values,
             symmetric: OnceLock::new(),
+            stencil_m_matrix: OnceLock::new(),
             transpose: OnceLock::new(),
             cholesky: OnceLock::new(),
             lu: OnceLock::new(),
             ic0: OnceLock::new(),
+            mic0: OnceLock::new(),
+            split: OnceLock::new(),
             ordering: None,
             solves: AtomicUsize::new(0),
             factorizations: AtomicUsize::new(0),
@@ -323,6 +331,34 @@ impl SparseMatrix {
                 )
             })
             .clone()
+    }
+
+    /// Whether the matrix is a weakly diagonally dominant M-matrix with short rows: positive
+    /// diagonal entries, no positive entry off the diagonal, each diagonal entry at least its
+    /// row's off-diagonal magnitudes, and at most 11 entries per row. Poisson matrices on grids
+    /// of any dimension are; [`super::SolveMethod::Auto`] solves them with MIC(0) conjugate
+    /// gradients. Computed once and cached.
+    pub fn is_stencil_m_matrix(&self) -> bool {
+        *self.stencil_m_matrix.get_or_init(|| {
+            (0..self.nrows).all(|i| {
+                let (start, end) = (self.row_ptr[i], self.row_ptr[i + 1]);
+                if end - start > 11 {
+                    return false;
+                }
+                let (mut diagonal, mut off) = (0.0, 0.0);
+                for k in start..end {
+                    let v = self.values[k];
+                    if self.col_indices[k] == i {
+                        diagonal = v;
+                    } else if v > 0.0 {
+                        return false;
+                    } else {
+                        off -= v;
+                    }
+                }
+                diagonal > 0.0 && diagonal >= off * (1.0 - 1e-12)
+            })
+        })
     }
 
     /// Whether the matrix is square and exactly symmetric (`A[i, j] == A[j, i]` bit for bit,
