@@ -709,7 +709,7 @@ impl<B: Backend> FlipSimulation<B> {
 
         // 3. Pressure projection on the cells holding particles, obstacles blocking their faces.
         // Read back once: the occupancy mask and, at the end, the step's largest displacement.
-        let before = positions.to_vec();
+        let before = positions.host_values();
         let occupied = occupied_cells_from_host(&before, domain, &self.device)?;
         let liquid = occupied.with_values(occupied.values() * &(1.0 - masks.solid.values()))?;
         let projection = pressure_projection(
@@ -808,21 +808,21 @@ impl<B: Backend> FlipSimulation<B> {
         }
         moved = clamp_into(&moved, domain)?;
 
-        let host = moved.to_vec();
+        let host = moved.host_values();
         if host.iter().any(|v| !v.is_finite()) {
             return Err(FlipError::NonFinite {
                 step,
                 what: "particle positions",
             });
         }
-        if new_velocities.to_vec().iter().any(|v| !v.is_finite()) {
+        if new_velocities.host_values().iter().any(|v| !v.is_finite()) {
             return Err(FlipError::NonFinite {
                 step,
                 what: "particle velocities",
             });
         }
         if let Some(c) = &new_affine
-            && c.to_vec().iter().any(|v| !v.is_finite())
+            && c.host_values().iter().any(|v| !v.is_finite())
         {
             return Err(FlipError::NonFinite {
                 step,

@@ -328,6 +328,11 @@ pub trait Backend: Copy + Clone + Debug + Default + Send + Sync + 'static {
     fn int_shape(tensor: &Self::Int) -> Vec<usize>;
     /// The values of `tensor` in row-major order, copied to the host.
     fn float_to_vec(tensor: &Self::Float) -> Vec<f32>;
+    /// The values of `tensor` in row-major order on the host: borrowed where the tensor already
+    /// lives there in that order (ndarray), else copied as by [`Backend::float_to_vec`].
+    fn float_host_values(tensor: &Self::Float) -> std::borrow::Cow<'_, [f32]> {
+        std::borrow::Cow::Owned(Self::float_to_vec(tensor))
+    }
     /// The values of `tensor` in row-major order, copied to the host.
     fn int_to_vec(tensor: &Self::Int) -> Vec<i64>;
 

@@ -95,6 +95,10 @@ impl Backend for NdArray {
         standard(tensor).into_owned()
     }
 
+    fn float_host_values(tensor: &Self::Float) -> Cow<'_, [f32]> {
+        standard(tensor)
+    }
+
     fn int_to_vec(tensor: &Self::Int) -> Vec<i64> {
         standard(tensor).into_owned()
     }
@@ -580,54 +584,75 @@ fn extrapolate_frontier(
     channels: usize,
     cells: usize,
 ) {
-    let d = grid.len();
+    match grid.len() {
+        1 => frontier_kernel::<1>(v, mask, grid, channels, cells),
+        2 => frontier_kernel::<2>(v, mask, grid, channels, cells),
+        3 => frontier_kernel::<3>(v, mask, grid, channels, cells),
+        _ => unreachable!("grids have one to three dimensions"),
+    }
+}
+
+/// [`extrapolate_frontier`] on a `D`-dimensional grid. It works on a copy padded by one site
+/// beyond every side (mask and values 0, never queued), so that every site's `3^D` box lies in
+/// the array and the loops need no bounds tests: a padding site adds the zero the composite
+/// adds beyond the edge.
+#[allow(clippy::needless_range_loop)] // box positions index several arrays
+fn frontier_kernel<const D: usize>(
+    v: &mut [f32],
+    mask: &mut [f32],
+    grid: &[usize],
+    channels: usize,
+    cells: usize,
+) {
     let sites: usize = grid.iter().product();
     if sites == 0 || cells == 0 {
         return;
     }
-    let mut strides = vec![1usize; d];
-    for axis in (0..d.saturating_sub(1)).rev() {
-        strides[axis] = strides[axis + 1] * grid[axis + 1];
+    let padded: [usize; D] = std::array::from_fn(|axis| grid[axis] + 2);
+    let mut strides = [1usize; D];
+    for axis in (0..D.saturating_sub(1)).rev() {
+        strides[axis] = strides[axis + 1] * padded[axis + 1];
     }
-    // The 3^d box around a site, itself included: per box position `k` (row-major over the
+    let padded_sites: usize = padded.iter().product();
+    // The interior: padded index of each grid site, row by row along the last axis.
+    let row = grid[D - 1];
+    let row_starts = || {
+        (0..sites / row).map(move |r| {
+            let (mut rest, mut at) = (r, 0);
+            for axis in (0..D - 1).rev() {
+                at += (rest % grid[axis] + 1) * strides[axis];
+                rest /= grid[axis];
+            }
+            (r * row, at + 1)
+        })
+    };
+    let mut pv = vec![0.0f32; padded_sites * channels];
+    let mut pm = vec![0.0f32; padded_sites];
+    let mut queued = vec![true; padded_sites];
+    for (site, at) in row_starts() {
+        pv[at * channels..(at + row) * channels]
+            .copy_from_slice(&v[site * channels..(site + row) * channels]);
+        pm[at..at + row].copy_from_slice(&mask[site..site + row]);
+        queued[at..at + row].fill(false);
+    }
+    // The 3^D box around a site, itself included: per box position `k` (row-major over the
     // per-axis steps −1, 0, +1, axis 0 slowest), its flat offset.
-    let positions = 3usize.pow(d as u32);
-    let mut box_offset = vec![0isize; positions];
-    for (k, offset) in box_offset.iter_mut().enumerate() {
+    let positions = 3usize.pow(D as u32);
+    let mut box_offset = [0isize; 27];
+    for (k, offset) in box_offset[..positions].iter_mut().enumerate() {
         let mut rest = k;
-        for axis in (0..d).rev() {
+        for axis in (0..D).rev() {
             let step = (rest % 3) as isize - 1;
             rest /= 3;
             *offset += step * strides[axis] as isize;
         }
     }
-    // Which box positions of `site` lie within the grid: `inside[k]`, built axis by axis (axis 0
-    // slowest, as the box positions run): each axis multiplies the entries so far by its three
-    // steps, the lower one within the grid unless the site is on the first layer, the upper one
-    // unless it is on the last.
-    let box_inside = |site: usize, inside: &mut [bool]| {
-        inside[0] = true;
-        let (mut len, mut rest) = (1, site);
-        for (&stride, &n) in strides.iter().zip(grid) {
-            let i = rest / stride;
-            rest %= stride;
-            let within = [i > 0, true, i + 1 < n];
-            // From the back, so that entry `j` is read before `3j..3j + 3` overwrite it.
-            for j in (0..len).rev() {
-                let outer = inside[j];
-                for (s, &w) in within.iter().enumerate().rev() {
-                    inside[3 * j + s] = outer && w;
-                }
-            }
-            len *= 3;
-        }
-    };
-    // The box sum of the gathered `values` (one per box position, 0 outside the grid) in
-    // box_sum_in_place's order: axis 0 first, each as `(below + centre) + above`. Sums in place;
-    // the result is `values[0]`.
+    let box_offset = &box_offset[..positions];
+    // The box sum of the gathered `values` (one per box position) in box_sum_in_place's order:
+    // axis 0 first, each as `(below + centre) + above`. Sums in place; the result is `values[0]`.
     let reduce_box = |values: &mut [f32]| {
         let mut len = values.len();
-        for _ in 0..d {
+        for _ in 0..D {
             len /= 3;
             for j in 0..len {
                 values[j] = (values[j] + values[len + j]) + values[2 * len + j];
@@ -635,38 +660,22 @@ fn extrapolate_frontier(
         }
         values[0]
     };
-
-    let mut queued = vec![false; sites];
+    // The first frontier: the invalid sites that see a valid one.
     let mut frontier = Vec::new();
-    let mut inside = vec![false; positions];
-    let enqueue_neighbours = |site: usize,
-                              mask: &[f32],
-                              queued: &mut [bool],
-                              inside: &mut [bool],
-                              out: &mut Vec<usize>| {
-        box_inside(site, inside);
-        for (&offset, &within) in box_offset.iter().zip(inside.iter()) {
-            if within {
-                let nb = site.wrapping_add_signed(offset);
-                if mask[nb] == 0.0 && !queued[nb] {
-                    queued[nb] = true;
-                    out.push(nb);
-                }
+    for (_, at) in row_starts() {
+        for site in at..at + row {
+            if pm[site] == 0.0
+                && box_offset
+                    .iter()
+                    .any(|&o| pm[site.wrapping_add_signed(o)] != 0.0)
+            {
+                queued[site] = true;
+                frontier.push(site);
             }
-        }
-    };
-    // The first frontier from one whole-grid box sum of the mask (row-wise, cheap): the invalid
-    // sites that see a valid one.
-    let mut near = mask.to_vec();
-    box_sum_in_place(&mut near, grid, 1, &mut Vec::new());
-    for (site, (&n, &m)) in near.iter().zip(mask.iter()).enumerate() {
-        if n > 0.0 && m == 0.0 {
-            queued[site] = true;
-            frontier.push(site);
         }
     }
     let mut updates = Vec::new();
-    let mut count_box = vec![0.0f32; positions];
+    let mut count_box = [0.0f32; 27];
     let mut sum_box = vec![0.0f32; positions * channels];
     let mut next = Vec::new();
     for _ in 0..cells {
@@ -675,24 +684,16 @@ fn extrapolate_frontier(
         }
         updates.clear();
         for &site in &frontier {
-            // Gather the mask and the masked values over the box, zeros outside the grid.
-            box_inside(site, &mut inside);
-            for (k, (&offset, &within)) in box_offset.iter().zip(inside.iter()).enumerate() {
-                if within {
-                    let nb = site.wrapping_add_signed(offset);
-                    let m = mask[nb];
-                    count_box[k] = m;
-                    for ch in 0..channels {
-                        sum_box[ch * positions + k] = v[nb * channels + ch] * m;
-                    }
-                } else {
-                    count_box[k] = 0.0;
-                    for ch in 0..channels {
-                        sum_box[ch * positions + k] = 0.0;
-                    }
+            // Gather the mask and the masked values over the box.
+            for (k, &offset) in box_offset.iter().enumerate() {
+                let nb = site.wrapping_add_signed(offset);
+                let m = pm[nb];
+                count_box[k] = m;
+                for ch in 0..channels {
+                    sum_box[ch * positions + k] = pv[nb * channels + ch] * m;
                 }
             }
-            let count = reduce_box(&mut count_box);
+            let count = reduce_box(&mut count_box[..positions]);
             // A frontier site has a valid neighbour: count > 0, and the composite divides by
             // `count + 0`.
             for sums in sum_box.chunks_exact_mut(positions) {
@@ -700,14 +701,27 @@ fn extrapolate_frontier(
             }
         }
         for (&site, new) in frontier.iter().zip(updates.chunks_exact(channels)) {
-            v[site * channels..(site + 1) * channels].copy_from_slice(new);
-            mask[site] = 1.0;
+            for (ch, &x) in new.iter().enumerate() {
+                pv[site * channels + ch] = x;
+            }
+            pm[site] = 1.0;
         }
         next.clear();
         for &site in &frontier {
-            enqueue_neighbours(site, mask, &mut queued, &mut inside, &mut next);
+            for &offset in box_offset {
+                let nb = site.wrapping_add_signed(offset);
+                if pm[nb] == 0.0 && !queued[nb] {
+                    queued[nb] = true;
+                    next.push(nb);
+                }
+            }
         }
         std::mem::swap(&mut frontier, &mut next);
+    }
+    for (site, at) in row_starts() {
+        v[site * channels..(site + row) * channels]
+            .copy_from_slice(&pv[at * channels..(at + row) * channels]);
+        mask[site..site + row].copy_from_slice(&pm[at..at + row]);
     }
 }
 
@@ -1423,19 +1437,27 @@ fn splat_kernel<const D: usize>(
             let n = p.len() / D;
             // First the stencils, block by block (vectorised): each point's lower corner and its
             // weight per corner (`corner_weights[corner][point]`). Then the adds, corner-major.
-            let mut flats = Vec::with_capacity(n);
+            // Whole blocks are appended (a fixed-size copy, inlined, where the `count` real
+            // points of the last block would call `memcpy` for every block), and the padding of
+            // the last block is cut off afterwards.
+            let padded = n.div_ceil(LANES) * LANES;
+            let mut flats = Vec::with_capacity(padded);
             let mut corner_weights: Vec<Vec<f32>> =
-                (0..1 << D).map(|_| Vec::with_capacity(n)).collect();
-            for_each_block::<D>(p, |_, x, count| {
+                (0..1 << D).map(|_| Vec::with_capacity(padded)).collect();
+            for_each_block::<D>(p, |_, x, _| {
                 let (flat, fraction) = fixed.lower_corners(x);
-                flats.extend_from_slice(&flat[..count]);
+                flats.extend_from_slice(&flat);
                 for (corner, out) in corner_weights.iter_mut().enumerate() {
                     let w: Lane = std::array::from_fn(|i| {
                         corner_weight::<D>(corner, &std::array::from_fn(|axis| fraction[axis][i]))
                     });
-                    out.extend_from_slice(&w[..count]);
+                    out.extend_from_slice(&w);
                 }
             });
+            flats.truncate(n);
+            for out in &mut corner_weights {
+                out.truncate(n);
+            }
             let samples: usize = indexer.shape.iter().product();
             assert!(sums.len() == samples * c && weights.len() == samples);
             for (&offset, corner_weights) in offsets.iter().zip(&corner_weights) {

@@ -97,10 +97,10 @@ pub fn pressure_projection<B: Backend>(
     };
     u = apply_wall_boundaries(&u)?;
 
-    let liquid_host = liquid.to_vec();
+    let liquid_host = liquid.host_values();
     let system = match &face_open {
         Some(open) => {
-            let weights: Vec<Vec<f32>> = open.components().iter().map(|c| c.to_vec()).collect();
+            let weights: Vec<_> = open.components().iter().map(|c| c.host_values()).collect();
             poisson_matrix(domain, &liquid_host, &weights)?
         }
         None => poisson_matrix(domain, &liquid_host, &crate::solve::all_faces_open(domain))?,

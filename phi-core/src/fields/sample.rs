@@ -521,7 +521,7 @@ pub fn count_particles<B: Backend>(points: &Tensor<B>, domain: &Domain) -> Resul
 /// [`TensorError::InvalidArgument`] when `points` is not `[N, d]`.
 pub fn occupied_cells<B: Backend>(points: &Tensor<B>, domain: &Domain) -> Result<CenteredGrid<B>> {
     check_points("occupied_cells", domain, points)?;
-    occupied_cells_from_host(&points.to_vec(), domain, &points.device())
+    occupied_cells_from_host(&points.host_values(), domain, &points.device())
 }
 
 /// [`occupied_cells`] of points already on the host, `points` row-major `[N, d]`, as a mask on

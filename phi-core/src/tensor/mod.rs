@@ -155,6 +155,12 @@ impl<B: Backend> Tensor<B> {
         B::float_to_vec(&self.primitive)
     }
 
+    /// The values in row-major order on the host, without a copy where the backend keeps them
+    /// there (ndarray): for reading, where [`Tensor::to_vec`] would copy.
+    pub fn host_values(&self) -> std::borrow::Cow<'_, [f32]> {
+        B::float_host_values(&self.primitive)
+    }
+
     /// The value of a one-element tensor.
     ///
     /// # Errors
