@@ -45,11 +45,15 @@ impl Far {
         if width > MAX_FAR || u32::try_from(rows).is_err() {
             return None;
         }
+        let mut cols = vec![0u32; rows * width];
+        if width > 0 {
+            for (i, row) in cols.chunks_exact_mut(width).enumerate() {
+                row.fill(i as u32);
+            }
+        }
         Some(Self {
             width,
-            cols: (0..rows)
-                .flat_map(|i| std::iter::repeat_n(i as u32, width))
-                .collect(),
+            cols,
             values: vec![0.0; rows * width],
         })
     }
@@ -190,63 +194,43 @@ pub(crate) struct ModifiedIncompleteCholesky {
 }
 
 impl ModifiedIncompleteCholesky {
-    /// MIC(0) of a symmetric matrix; `None` where a diagonal entry is missing or not positive,
-    /// where a value is not finite, where a row has more than [`MAX_FAR`] entries outside the
-    /// diagonal and its two neighbours, or for more than `u32::MAX` rows.
-    pub(crate) fn new(matrix: &SparseMatrix) -> Option<Self> {
-        let n = matrix.nrows();
-        u32::try_from(n).ok()?;
-        // The diagonal, the couplings to the previous row and, by row, the entries right of the
-        // next row (the matrix keeps its columns sorted). By symmetry these hold the whole
-        // matrix: row k's entries right of the diagonal are column k's below it.
-        let mut diagonal = vec![0.0f64; n];
-        let mut previous = vec![0.0f64; n];
-        let mut coupled = vec![false; n];
-        let mut upper_ptr = Vec::with_capacity(n + 1);
-        let mut upper_cols = Vec::with_capacity(matrix.nnz() / 2);
-        let mut upper_values = Vec::with_capacity(matrix.nnz() / 2);
-        let mut lower_count = vec![0usize; n];
-        upper_ptr.push(0);
-        for i in 0..n {
-            for (j, v) in matrix.row(i) {
-                if j == i {
-                    diagonal[i] = v;
-                } else if j + 1 == i {
-                    previous[i] = v;
-                    coupled[i] = true;
-                } else if j > i + 1 {
-                    upper_cols.push(j);
-                    upper_values.push(v);
-                    lower_count[j] += 1;
-                }
-            }
-            upper_ptr.push(upper_cols.len());
-        }
-        if diagonal.iter().any(|d| !(d.is_finite() && *d > 0.0))
-            || previous.iter().chain(&upper_values).any(|v| !v.is_finite())
+    /// MIC(0) of the symmetric matrix `split` holds; `None` where a pivot or a value is not
+    /// finite. Entries stored as zeros count as absent from the pattern.
+    pub(crate) fn new(split: &SplitMatrix) -> Option<Self> {
+        let n = split.diagonal.len();
+        let w = split.far.width;
+        let cols = &split.far.cols;
+        let original = &split.diagonal;
+        if original.iter().any(|d| !(d.is_finite() && *d > 0.0))
+            || split.previous.iter().any(|v| !v.is_finite())
+            || split.far.values.iter().any(|v| !v.is_finite())
         {
             return None;
         }
+        // The working copy: pivots accumulate in `diagonal`, column k's entries below the
+        // diagonal live in `previous[k + 1]` and in row k's far slots right of the diagonal
+        // (symmetry: row k right of the diagonal is column k below it).
+        let mut diagonal = original.clone();
+        let mut previous = split.previous.clone();
+        let mut values = split.far.values.clone();
+        let mut pivots = vec![0.0f64; n];
         // Where the pair (i, j), i < j, sits: `Some(None)` on the coupling `previous[j]`,
-        // `Some(Some(p))` at `upper_values[p]`, `None` outside the pattern.
-        let entry = |i: usize, j: usize, upper_cols: &[usize]| -> Option<Option<usize>> {
+        // `Some(Some(t))` in far slot `t` of row i, `None` outside the pattern.
+        let pattern = &split.far.values;
+        let entry = |i: usize, j: usize| {
             if j == i + 1 {
-                return coupled[j].then_some(None);
+                return (split.previous[j] != 0.0).then_some(None);
             }
-            let row = upper_ptr[i]..upper_ptr[i + 1];
-            upper_cols[row.clone()]
-                .iter()
-                .position(|&c| c == j)
-                .map(|at| Some(row.start + at))
+            (i * w..(i + 1) * w)
+                .find(|&t| cols[t] as usize == j && pattern[t] != 0.0)
+                .map(Some)
         };
         // Right-looking elimination on the pattern in the `U D Uᵀ` form (no square roots): with
         // pivot `d = D[k]`, every pair of rows `i < j` below `k` is updated by
         // `A'[i,k] A'[j,k] / d`, on the pattern where the pair's entry exists and on the two
         // diagonals (times TAU) where it does not; then column k is divided by `d`, which makes it
-        // `U`'s. Column k's entries: the next row's coupling, then row k's upper entries.
-        let original = diagonal.clone();
-        let mut pivots = vec![0.0f64; n];
-        let mut column: Vec<(usize, f64)> = Vec::with_capacity(MAX_FAR + 1);
+        // `U`'s.
+        let mut column = [(0usize, 0.0f64); MAX_FAR + 1];
         for k in 0..n {
             // The pivot, or the diagonal entry where the pivot fell too low (or turned NaN).
             let d = if diagonal[k] > SIGMA * original[k] {
@@ -256,25 +240,26 @@ impl ModifiedIncompleteCholesky {
             };
             pivots[k] = d;
             let inverse = 1.0 / d;
-            column.clear();
-            if k + 1 < n && coupled[k + 1] {
-                column.push((k + 1, previous[k + 1]));
+            let mut len = 0;
+            if k + 1 < n && split.previous[k + 1] != 0.0 {
+                column[len] = (k + 1, previous[k + 1]);
+                len += 1;
             }
-            let row = upper_ptr[k]..upper_ptr[k + 1];
-            column.extend(
-                upper_cols[row.clone()]
-                    .iter()
-                    .copied()
-                    .zip(upper_values[row.clone()].iter().copied()),
-            );
-            for (a, &(i, vi)) in column.iter().enumerate() {
+            for t in k * w..(k + 1) * w {
+                if cols[t] as usize > k && pattern[t] != 0.0 {
+                    column[len] = (cols[t] as usize, values[t]);
+                    len += 1;
+                }
+            }
+            for a in 0..len {
+                let (i, vi) = column[a];
                 let scaled = vi * inverse;
                 diagonal[i] -= scaled * vi;
-                for &(j, vj) in &column[a + 1..] {
+                for &(j, vj) in &column[a + 1..len] {
                     let update = scaled * vj;
-                    match entry(i, j, &upper_cols) {
+                    match entry(i, j) {
                         Some(None) => previous[j] -= update,
-                        Some(Some(p)) => upper_values[p] -= update,
+                        Some(Some(t)) => values[t] -= update,
                         None => {
                             diagonal[i] -= TAU * update;
                             diagonal[j] -= TAU * update;
@@ -282,36 +267,53 @@ impl ModifiedIncompleteCholesky {
                     }
                 }
             }
-            if k + 1 < n && coupled[k + 1] {
+            if k + 1 < n {
                 previous[k + 1] *= inverse;
             }
-            for v in &mut upper_values[row] {
-                *v *= inverse;
+            for t in k * w..(k + 1) * w {
+                if cols[t] as usize > k {
+                    values[t] *= inverse;
+                }
             }
         }
-        // The layouts: Uᵀ's rows are the upper rows; U's far rows their transpose, filled in
-        // column order so that each row's entries stay sorted.
-        let upper_width = upper_ptr.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
-        let lower_width = lower_count.iter().copied().max().unwrap_or(0);
+        // The layouts: Uᵀ's far rows are the slots right of the diagonal; U's are the slots left
+        // of it, whose values sit in the mirror slot (the column's row, right of its diagonal).
+        let count = |i: usize, right: bool| {
+            (i * w..(i + 1) * w)
+                .filter(|&t| {
+                    let j = cols[t] as usize;
+                    pattern[t] != 0.0 && if right { j > i } else { j < i }
+                })
+                .count()
+        };
+        let upper_width = (0..n).map(|i| count(i, true)).max().unwrap_or(0);
+        let lower_width = (0..n).map(|i| count(i, false)).max().unwrap_or(0);
         let mut upper = Far::padding(n, upper_width)?;
         let mut lower = Far::padding(n, lower_width)?;
-        let mut lower_fill = vec![0usize; n];
-        for k in 0..n {
-            for (slot, p) in (upper_ptr[k]..upper_ptr[k + 1]).enumerate() {
-                let (i, u) = (upper_cols[p], upper_values[p]);
-                upper.cols[k * upper_width + slot] = i as u32;
-                upper.values[k * upper_width + slot] = u;
-                let at = i * lower_width + lower_fill[i];
-                lower.cols[at] = k as u32;
-                lower.values[at] = u;
-                lower_fill[i] += 1;
+        for i in 0..n {
+            let (mut up, mut low) = (i * upper_width, i * lower_width);
+            for t in i * w..(i + 1) * w {
+                let j = cols[t] as usize;
+                if pattern[t] == 0.0 || j == i {
+                    continue;
+                }
+                if j > i {
+                    upper.cols[up] = j as u32;
+                    upper.values[up] = values[t];
+                    up += 1;
+                } else {
+                    let mirror = (j * w..(j + 1) * w).find(|&m| cols[m] as usize == i)?;
+                    lower.cols[low] = j as u32;
+                    lower.values[low] = values[mirror];
+                    low += 1;
+                }
             }
         }
         let inverse_pivots: Vec<f64> = pivots.iter().map(|d| 1.0 / d).collect();
         if inverse_pivots
             .iter()
             .chain(&previous)
-            .chain(&upper_values)
+            .chain(&upper.values)
             .any(|v| !v.is_finite())
         {
             return None;
@@ -324,11 +326,12 @@ impl ModifiedIncompleteCholesky {
         })
     }
 
-    /// `z = M⁻¹ r`.
+    /// `z = M⁻¹ r`; returns `rᵀ z`, summed during the backward substitution (which conjugate
+    /// gradients need next, and which would otherwise take another pass).
     ///
     /// # Panics
     /// When `r` or `z` does not have one entry per row.
-    pub(crate) fn apply(&self, r: &[f64], z: &mut [f64]) {
+    pub(crate) fn apply(&self, r: &[f64], z: &mut [f64]) -> f64 {
         let n = self.inverse_pivots.len();
         assert!(
             r.len() == n && z.len() == n,
@@ -342,11 +345,11 @@ impl ModifiedIncompleteCholesky {
             _ => self.forward::<MAX_FAR>(r, z),
         }
         match self.upper.width {
-            0 => self.backward::<0>(z),
-            1 => self.backward::<1>(z),
-            2 => self.backward::<2>(z),
-            3 => self.backward::<3>(z),
-            _ => self.backward::<MAX_FAR>(z),
+            0 => self.backward::<0>(r, z),
+            1 => self.backward::<1>(r, z),
+            2 => self.backward::<2>(r, z),
+            3 => self.backward::<3>(r, z),
+            _ => self.backward::<MAX_FAR>(r, z),
         }
     }
 
@@ -386,9 +389,10 @@ impl ModifiedIncompleteCholesky {
 
     /// `Uᵀ z' = D⁻¹ z` in place, from the last row, in pairs as in [`Self::forward`]; `W` far
     /// entries per row. Row `i`'s coupling to row `i + 1` is `U[i + 1, i] = previous[i + 1]`.
-    fn backward<const W: usize>(&self, z: &mut [f64]) {
+    /// Returns `rᵀ z'` (one partial sum per row of a pair, off the substitution's chain).
+    fn backward<const W: usize>(&self, r: &[f64], z: &mut [f64]) -> f64 {
         let n = self.previous.len();
-        assert!(z.len() == n);
+        assert!(z.len() == n && r.len() == n);
         let exact = W == self.upper.width;
         let far = |i: usize, z: &[f64]| {
             if exact {
@@ -401,10 +405,12 @@ impl ModifiedIncompleteCholesky {
         let c = &self.previous;
         let d = &self.inverse_pivots;
         let mut last = 0.0;
+        let (mut even, mut odd) = (0.0, 0.0);
         if n % 2 == 1 {
             let i = n - 1;
             z[i] = z[i] * d[i] - far(i, z);
             last = z[i];
+            even = r[i] * last;
         }
         for j in (0..n - n % 2).step_by(2).rev() {
             let b1 = z[j + 1] * d[j + 1] - far(j + 1, z);
@@ -416,6 +422,9 @@ impl ModifiedIncompleteCholesky {
             z[j] = z0;
             z[j + 1] = z1;
             last = z0;
+            even += r[j] * z0;
+            odd += r[j + 1] * z1;
         }
+        even + odd
     }
 }

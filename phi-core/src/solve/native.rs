@@ -709,7 +709,8 @@ enum Precond {
 }
 
 impl Precond {
-    fn apply(&self, r: &[f64], z: &mut [f64]) {
+    /// `z = M⁻¹ r`; returns `rᵀ z`.
+    fn apply(&self, r: &[f64], z: &mut [f64]) -> f64 {
         match self {
             Precond::Identity => z.copy_from_slice(r),
             Precond::Jacobi(inverse) => {
@@ -718,8 +719,9 @@ impl Precond {
                 }
             }
             Precond::Ic(ic) => ic.apply(r, z),
-            Precond::Mic(mic) => mic.apply(r, z),
+            Precond::Mic(mic) => return mic.apply(r, z),
         }
+        dot(r, z)
     }
 }
 
@@ -758,7 +760,8 @@ fn preconditioner(matrix: &SparseMatrix, kind: Preconditioner) -> Result<Precond
                 .mic0
                 .get_or_init(|| {
                     matrix.count_factorization();
-                    ModifiedIncompleteCholesky::new(matrix).map(Arc::new)
+                    split_of(matrix)
+                        .and_then(|split| ModifiedIncompleteCholesky::new(&split).map(Arc::new))
                 })
                 .clone();
             match mic {
@@ -767,6 +770,15 @@ fn preconditioner(matrix: &SparseMatrix, kind: Preconditioner) -> Result<Precond
             }
         }
     }
+}
+
+/// The product layout of a symmetric `matrix` ([`SplitMatrix`]), built once and cached; `None`
+/// where its rows do not fit.
+fn split_of(matrix: &SparseMatrix) -> Option<Arc<SplitMatrix>> {
+    matrix
+        .split
+        .get_or_init(|| SplitMatrix::new(matrix).map(Arc::new))
+        .clone()
 }
 
 /// Preconditioned conjugate gradients from `x = 0` on `system` (symmetric: `system` is
@@ -789,10 +801,7 @@ fn pcg(
     }
     let precond = preconditioner(matrix, kind)?;
     let split = if std::ptr::eq(system, matrix) {
-        matrix
-            .split
-            .get_or_init(|| SplitMatrix::new(matrix).map(Arc::new))
-            .clone()
+        split_of(matrix)
     } else {
         None
     };
@@ -802,9 +811,8 @@ fn pcg(
     };
     let mut z = vec![0.0; n];
     let mut q = vec![0.0; n];
-    precond.apply(&r, &mut z);
+    let mut rz = precond.apply(&r, &mut z);
     let mut p = z.clone();
-    let mut rz = dot(&r, &z);
     let mut iterations = 0;
     while iterations < options.max_iterations {
         iterations += 1;
@@ -836,13 +844,11 @@ fn pcg(
                 return Ok((x, iterations, true_residual));
             }
             residual = true_residual;
-            precond.apply(&r, &mut z);
+            rz = precond.apply(&r, &mut z);
             p.copy_from_slice(&z);
-            rz = dot(&r, &z);
             continue;
         }
-        precond.apply(&r, &mut z);
-        let rz_next = dot(&r, &z);
+        let rz_next = precond.apply(&r, &mut z);
         let beta = rz_next / rz;
         rz = rz_next;
         for (p, z) in p.iter_mut().zip(&z) {
