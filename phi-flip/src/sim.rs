@@ -872,9 +872,9 @@ fn largest_displacement<const D: usize>(after: &[f32], before: &[f32], domain: &
     );
     let (a_rest, b_rest) = (a_blocks.remainder(), b_blocks.remainder());
     for (a, b) in a_blocks.zip(b_blocks) {
-        for lane in 0..LANES {
+        for (lane, largest) in largest.iter_mut().enumerate() {
             let at = lane * D..(lane + 1) * D;
-            largest[lane] = largest[lane].max(squared(&a[at.clone()], &b[at]));
+            *largest = largest.max(squared(&a[at.clone()], &b[at]));
         }
     }
     for (a, b) in a_rest.chunks_exact(D).zip(b_rest.chunks_exact(D)) {
