@@ -547,6 +547,13 @@ pub fn occupied_cells_from_host<B: Backend>(
             ),
         });
     }
+    if i32::try_from(domain.cell_count()).is_err() {
+        return Err(TensorError::InvalidArgument {
+            op: "occupied_cells_from_host",
+            shape: domain.resolution().to_vec(),
+            reason: "more cells than 32-bit indices address".into(),
+        });
+    }
     let mut mask = vec![0.0f32; domain.cell_count()];
     match d {
         1 => mark_nearest_cells::<1>(&lattice, points, &mut mask),
@@ -560,28 +567,41 @@ pub fn occupied_cells_from_host<B: Backend>(
 }
 
 /// Sets `mask` to 1 at the cell nearest to each of `points [N, D]` (row-major) on the cell-centre
-/// `lattice`: [`occupied_cells_from_host`]'s loop, with the axes unrolled.
+/// `lattice`: [`occupied_cells_from_host`]'s loop, with the axes unrolled and the index arithmetic
+/// done for blocks of points in lanes (vectorised; the stores stay scalar).
 fn mark_nearest_cells<const D: usize>(lattice: &SampleLattice, points: &[f32], mask: &mut [f32]) {
+    const LANES: usize = 16;
     let origin: [f32; D] = std::array::from_fn(|axis| lattice.origin[axis]);
     let inverse: [f32; D] = std::array::from_fn(|axis| 1.0 / lattice.spacing[axis]);
     let upper: [f32; D] = std::array::from_fn(|axis| (lattice.shape[axis] - 1) as f32);
-    let last: [usize; D] = std::array::from_fn(|axis| lattice.shape[axis] - 1);
+    let last: [i32; D] = std::array::from_fn(|axis| (lattice.shape[axis] - 1) as i32);
     let strides = lattice.strides();
-    let strides: [usize; D] = std::array::from_fn(|axis| strides[axis] as usize);
-    for point in points.chunks_exact(D) {
-        let mut flat = 0usize;
-        for axis in 0..D {
-            // As `continuous_indices` and `nearest_stencil`: clamp, round half up, clamp.
-            // `max` also maps NaN to 0. The index is then ≥ 0, so truncation is `floor`.
-            let index = ((point[axis] - origin[axis]) * inverse[axis])
-                .max(0.0)
-                .min(upper[axis]);
-            // Through `i64`, which converts in one instruction (`usize` needs a fix-up for
-            // values beyond `i64::MAX`, which cannot occur here: the index is at most shape − ½).
-            let nearest = ((index + 0.5) as i64 as usize).min(last[axis]);
-            flat += nearest * strides[axis];
+    let strides: [i32; D] = std::array::from_fn(|axis| strides[axis] as i32);
+    // As `continuous_indices` and `nearest_stencil`: clamp, round half up, clamp. `max` also
+    // maps NaN to 0. The index is then ≥ 0, so truncation is `floor`; a cell index fits `i32`
+    // (the caller checks the cell count).
+    let nearest = |x: f32, axis: usize| {
+        let index = ((x - origin[axis]) * inverse[axis])
+            .max(0.0)
+            .min(upper[axis]);
+        ((index + 0.5) as i32).min(last[axis]) * strides[axis]
+    };
+    let blocks = points.chunks_exact(D * LANES);
+    let rest = blocks.remainder();
+    for block in blocks {
+        let mut flat = [0i32; LANES];
+        for (lane, flat) in flat.iter_mut().enumerate() {
+            for axis in 0..D {
+                *flat += nearest(block[lane * D + axis], axis);
+            }
         }
-        mask[flat] = 1.0;
+        for at in flat {
+            mask[at as usize] = 1.0;
+        }
+    }
+    for point in rest.chunks_exact(D) {
+        let flat: i32 = (0..D).map(|axis| nearest(point[axis], axis)).sum();
+        mask[flat as usize] = 1.0;
     }
 }
 
