@@ -851,7 +851,7 @@ impl<B: Backend> FlipSimulation<B> {
     }
 }
 
-/// Whether every value is finite. `x − x` is 0 for a finite `x` and NaN otherwise; the sums run
+/// Whether every value is finite. `0 · x` is 0 for a finite `x` and NaN otherwise; the sums run
 /// in lanes over all values without an early exit, so the check (over every particle, every
 /// step) vectorises.
 fn all_finite(values: &[f32]) -> bool {
@@ -861,10 +861,10 @@ fn all_finite(values: &[f32]) -> bool {
     let rest = blocks.remainder();
     for block in blocks {
         for (sum, &x) in sums.iter_mut().zip(block) {
-            *sum += x - x;
+            *sum += x * 0.0;
         }
     }
-    let total = rest.iter().map(|x| x - x).sum::<f32>() + sums.iter().sum::<f32>();
+    let total = rest.iter().map(|x| x * 0.0).sum::<f32>() + sums.iter().sum::<f32>();
     total == 0.0
 }
 
