@@ -650,6 +650,30 @@ pub trait Backend: Copy + Clone + Debug + Default + Send + Sync + 'static {
         crate::fields::sample::composite_lattice_splat::<Self>(lattice, points, values, transfer)
     }
 
+    /// [`Backend::float_lattice_splat`] of each column of `values [N, k]` onto its own lattice:
+    /// column `j` onto `lattices[j]` (`k` lattices; the components of a staggered grid), each
+    /// returning its `(Σ w v [samples, 1], Σ w [samples, 1])`. The default splats the columns one
+    /// by one; a backend may interleave them, with the same values.
+    ///
+    /// # Errors
+    /// Only shape errors, which the callers in [`crate::fields`] rule out.
+    fn float_lattice_splat_columns(
+        lattices: &[crate::fields::SampleLattice],
+        points: Self::Float,
+        values: Self::Float,
+        transfer: crate::fields::Transfer,
+    ) -> Result<Vec<(Self::Float, Self::Float)>> {
+        let n = Self::float_shape(&values)[0];
+        lattices
+            .iter()
+            .enumerate()
+            .map(|(j, lattice)| {
+                let column = Self::float_slice(values.clone(), &[0..n, j..j + 1]);
+                Self::float_lattice_splat(lattice, points.clone(), column, transfer)
+            })
+            .collect()
+    }
+
     /// `points [N, d]` moved over `dt` through a frozen staggered velocity by `integrator`
     /// ([`advect_points`](crate::fields::advect_points)): component `i` of the velocity is
     /// `components[i]` (`[samples_i, 1]`) on `lattices[i]`, sampled as

@@ -473,6 +473,45 @@ impl Backend for NdArray {
         ))
     }
 
+    fn float_lattice_splat_columns(
+        lattices: &[SampleLattice],
+        points: Self::Float,
+        values: Self::Float,
+        transfer: Transfer,
+    ) -> Result<Vec<(Self::Float, Self::Float)>> {
+        let (n, k) = (values.shape()[0], values.shape()[1]);
+        let d = lattices.len();
+        let fused = transfer == Transfer::Linear
+            && k == d
+            && (d == 2 || d == 3)
+            && lattices.iter().all(|l| l.shape.len() == d);
+        if !fused {
+            return lattices
+                .iter()
+                .enumerate()
+                .map(|(j, lattice)| {
+                    let column = Self::float_slice(values.clone(), &[0..n, j..j + 1]);
+                    Self::float_lattice_splat(lattice, points.clone(), column, transfer)
+                })
+                .collect();
+        }
+        let (v, p) = (standard(&values), standard(&points));
+        let out = match d {
+            2 => splat_columns_kernel::<2>(lattices, &v, &p),
+            _ => splat_columns_kernel::<3>(lattices, &v, &p),
+        };
+        Ok(out
+            .into_iter()
+            .map(|(sums, weights)| {
+                let samples = weights.len();
+                (
+                    from_vec(sums, &[samples, 1]),
+                    from_vec(weights, &[samples, 1]),
+                )
+            })
+            .collect())
+    }
+
     fn float_advect_points(
         lattices: &[SampleLattice],
         components: &[Self::Float],
@@ -1405,6 +1444,96 @@ fn advect_kernel<const D: usize>(
     out
 }
 
+/// The tent stencils of `p [N, D]` on a lattice, block by block (vectorised): each point's lower
+/// corner (flat index) and its weight per corner (`corner_weights[corner][point]`).
+fn linear_stencils<const D: usize>(
+    fixed: &FixedIndexer<D>,
+    p: &[f32],
+) -> (Vec<u32>, Vec<Vec<f32>>) {
+    let n = p.len() / D;
+    // Whole blocks are appended (a fixed-size copy, inlined, where the `count` real points of the
+    // last block would call `memcpy` for every block), and the padding of the last block is cut
+    // off afterwards.
+    let padded = n.div_ceil(LANES) * LANES;
+    let mut flats = Vec::with_capacity(padded);
+    let mut corner_weights: Vec<Vec<f32>> =
+        (0..1 << D).map(|_| Vec::with_capacity(padded)).collect();
+    for_each_block::<D>(p, |_, x, _| {
+        let (flat, fraction) = fixed.lower_corners(x);
+        flats.extend_from_slice(&flat);
+        for (corner, out) in corner_weights.iter_mut().enumerate() {
+            let w: Lane = std::array::from_fn(|i| {
+                corner_weight::<D>(corner, &std::array::from_fn(|axis| fraction[axis][i]))
+            });
+            out.extend_from_slice(&w);
+        }
+    });
+    flats.truncate(n);
+    for out in &mut corner_weights {
+        out.truncate(n);
+    }
+    (flats, corner_weights)
+}
+
+/// [`Backend::float_lattice_splat_columns`] with tent weights for `D` columns onto `D` lattices
+/// of dimension `D` (a staggered grid's components): `(sums, weights)` per lattice. The stencils
+/// are those of [`splat_kernel`]; the adds of the `D` lattices are interleaved point by point.
+/// Each lattice still receives its adds corner-major in point order, so its sums round exactly
+/// as [`splat_kernel`]'s; but where consecutive points add to the same sample, each add waits
+/// for the one before (through memory), and the other lattices' adds fill that wait.
+fn splat_columns_kernel<const D: usize>(
+    lattices: &[SampleLattice],
+    v: &[f32],
+    p: &[f32],
+) -> Vec<(Vec<f32>, Vec<f32>)> {
+    let n = p.len() / D;
+    assert!(lattices.len() == D && v.len() == n * D);
+    let indexers: Vec<LatticeIndexer> = lattices.iter().map(LatticeIndexer::new).collect();
+    let stencils: Vec<(Vec<u32>, Vec<Vec<f32>>)> = indexers
+        .iter()
+        .map(|indexer| linear_stencils(&FixedIndexer::<D>::new(indexer), p))
+        .collect();
+    let offsets: Vec<[usize; 8]> = indexers.iter().map(corner_offsets::<D>).collect();
+    let mut out: Vec<(Vec<f32>, Vec<f32>)> = indexers
+        .iter()
+        .map(|indexer| {
+            let samples: usize = indexer.shape.iter().product();
+            (vec![0.0; samples], vec![0.0; samples])
+        })
+        .collect();
+    let flats: [&[u32]; D] = std::array::from_fn(|j| &stencils[j].0[..n]);
+    for corner in 0..1 << D {
+        let weights: [&[f32]; D] = std::array::from_fn(|j| &stencils[j].1[corner][..n]);
+        let offset: [usize; D] = std::array::from_fn(|j| offsets[j][corner]);
+        let mut sinks: [(&mut [f32], &mut [f32]); D] = {
+            let mut rest = &mut out[..];
+            std::array::from_fn(|_| {
+                let (first, tail) = std::mem::take(&mut rest)
+                    .split_first_mut()
+                    .expect("one output per lattice");
+                rest = tail;
+                (&mut first.0[..], &mut first.1[..])
+            })
+        };
+        for (k, point) in v.chunks_exact(D).enumerate() {
+            for j in 0..D {
+                let at = flats[j][k] as usize + offset[j];
+                let weight = weights[j][k];
+                let (sums, sample_weights) = &mut sinks[j];
+                debug_assert!(at < sums.len() && at < sample_weights.len());
+                // SAFETY: `at` is a corner of a lower corner from `lower_corners`, at most
+                // `samples − 1` of lattice `j` (see `ComponentSampler::sample_block`), and both
+                // arrays hold that lattice's `samples` values.
+                unsafe {
+                    *sums.get_unchecked_mut(at) += point[j] * weight;
+                    *sample_weights.get_unchecked_mut(at) += weight;
+                }
+            }
+        }
+    }
+    out
+}
+
 /// [`Backend::float_lattice_splat`] on a `D`-dimensional lattice into `(sums [samples, c],
 /// weights [samples])`. Tent weights are added corner-major, as the composite scatter adds, so
 /// that the sums round the same.
@@ -1434,30 +1563,7 @@ fn splat_kernel<const D: usize>(
         }
         Transfer::Linear => {
             let offsets = corner_offsets::<D>(indexer);
-            let n = p.len() / D;
-            // First the stencils, block by block (vectorised): each point's lower corner and its
-            // weight per corner (`corner_weights[corner][point]`). Then the adds, corner-major.
-            // Whole blocks are appended (a fixed-size copy, inlined, where the `count` real
-            // points of the last block would call `memcpy` for every block), and the padding of
-            // the last block is cut off afterwards.
-            let padded = n.div_ceil(LANES) * LANES;
-            let mut flats = Vec::with_capacity(padded);
-            let mut corner_weights: Vec<Vec<f32>> =
-                (0..1 << D).map(|_| Vec::with_capacity(padded)).collect();
-            for_each_block::<D>(p, |_, x, _| {
-                let (flat, fraction) = fixed.lower_corners(x);
-                flats.extend_from_slice(&flat);
-                for (corner, out) in corner_weights.iter_mut().enumerate() {
-                    let w: Lane = std::array::from_fn(|i| {
-                        corner_weight::<D>(corner, &std::array::from_fn(|axis| fraction[axis][i]))
-                    });
-                    out.extend_from_slice(&w);
-                }
-            });
-            flats.truncate(n);
-            for out in &mut corner_weights {
-                out.truncate(n);
-            }
+            let (flats, corner_weights) = linear_stencils(&fixed, p);
             let samples: usize = indexer.shape.iter().product();
             assert!(sums.len() == samples * c && weights.len() == samples);
             for (&offset, corner_weights) in offsets.iter().zip(&corner_weights) {

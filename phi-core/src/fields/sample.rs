@@ -443,14 +443,24 @@ pub fn particles_to_staggered<B: Backend>(
             ),
         });
     }
+    let lattices: Vec<SampleLattice> = (0..d)
+        .map(|axis| SampleLattice::of(domain, Some(axis)))
+        .collect();
+    // Velocity component `axis` onto the faces of `axis`, all components in one backend call.
+    let splats = B::float_lattice_splat_columns(
+        &lattices,
+        cloud.positions().primitive().clone(),
+        cloud.values().primitive().clone(),
+        transfer,
+    )?;
     let mut values = Vec::with_capacity(d);
     let mut weights = Vec::with_capacity(d);
-    for axis in 0..d {
-        let lattice = SampleLattice::of(domain, Some(axis));
-        let samples: usize = lattice.shape.iter().product();
-        let column = cloud.values().narrow(1, axis..axis + 1)?;
-        let (sums, weight_sums) = lattice.splat(cloud.positions(), &column, transfer)?;
-        debug_assert_eq!(sums.shape()[0], samples);
+    for (lattice, (sums, weight_sums)) in lattices.iter().zip(splats) {
+        let (sums, weight_sums) = (
+            Tensor::from_primitive(sums),
+            Tensor::from_primitive(weight_sums),
+        );
+        debug_assert_eq!(sums.shape()[0], lattice.shape.iter().product::<usize>());
         values.push(normalise(&sums, &weight_sums).reshape(&lattice.shape)?);
         weights.push(weight_sums.reshape(&lattice.shape)?);
     }
