@@ -1481,6 +1481,7 @@ fn linear_stencils<const D: usize>(
 /// Each lattice still receives its adds corner-major in point order, so its sums round exactly
 /// as [`splat_kernel`]'s; but where consecutive points add to the same sample, each add waits
 /// for the one before (through memory), and the other lattices' adds fill that wait.
+#[allow(clippy::needless_range_loop)] // corners and lattices index several arrays
 fn splat_columns_kernel<const D: usize>(
     lattices: &[SampleLattice],
     v: &[f32],
