@@ -318,5 +318,33 @@ fn fused_lattice_transfers_match_the_composite_bit_for_bit() {
                 }
             }
         }
+        // All components in one call (interleaved on ndarray): each column lands as the
+        // composite splats it alone.
+        let lattices = sample::staggered_lattices(&domain);
+        let values: Vec<f32> = (0..n * d).map(|_| rng.random_range(-3.0..3.0)).collect();
+        let values = T::from_vec(values, &[n, d], &device()).unwrap();
+        for transfer in [Transfer::Linear, Transfer::NearestFace] {
+            let fused = NdArray::float_lattice_splat_columns(
+                &lattices,
+                points.primitive().clone(),
+                values.primitive().clone(),
+                transfer,
+            )
+            .unwrap();
+            assert_eq!(fused.len(), d);
+            for (j, (lattice, (sums, weights))) in lattices.iter().zip(&fused).enumerate() {
+                let column = values.narrow(1, j..j + 1).unwrap();
+                let (plain_sums, plain_weights) = sample::composite_lattice_splat::<NdArray>(
+                    lattice,
+                    points.primitive().clone(),
+                    column.primitive().clone(),
+                    transfer,
+                )
+                .unwrap();
+                let case = format!("column splat {res:?} component {j} {transfer:?}");
+                assert_eq!(bits(sums), bits(&plain_sums), "{case}");
+                assert_eq!(bits(weights), bits(&plain_weights), "{case}");
+            }
+        }
     }
 }
