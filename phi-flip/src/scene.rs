@@ -19,8 +19,9 @@
 //! seed = 0
 //!
 //! [solver]
-//! tolerance = 1e-5
+//! tolerance = 1e-5               # relative residual of the pressure solve
 //! max_iterations = 1000
+//! method = "auto"                # "auto" / "cg" (MIC(0) conjugate gradients) | "cholesky" (direct)
 //!
 //! [[liquid]]
 //! geometry = { type = "box", lower = [0, 0], upper = [64, 15] }
