@@ -663,15 +663,9 @@ pub trait Backend: Copy + Clone + Debug + Default + Send + Sync + 'static {
         values: Self::Float,
         transfer: crate::fields::Transfer,
     ) -> Result<Vec<(Self::Float, Self::Float)>> {
-        let n = Self::float_shape(&values)[0];
-        lattices
-            .iter()
-            .enumerate()
-            .map(|(j, lattice)| {
-                let column = Self::float_slice(values.clone(), &[0..n, j..j + 1]);
-                Self::float_lattice_splat(lattice, points.clone(), column, transfer)
-            })
-            .collect()
+        crate::fields::sample::lattice_splat_columns_one_by_one::<Self>(
+            lattices, points, values, transfer,
+        )
     }
 
     /// `points [N, d]` moved over `dt` through a frozen staggered velocity by `integrator`

@@ -479,21 +479,15 @@ impl Backend for NdArray {
         values: Self::Float,
         transfer: Transfer,
     ) -> Result<Vec<(Self::Float, Self::Float)>> {
-        let (n, k) = (values.shape()[0], values.shape()[1]);
         let d = lattices.len();
         let fused = transfer == Transfer::Linear
-            && k == d
+            && values.shape()[1] == d
             && (d == 2 || d == 3)
             && lattices.iter().all(|l| l.shape.len() == d);
         if !fused {
-            return lattices
-                .iter()
-                .enumerate()
-                .map(|(j, lattice)| {
-                    let column = Self::float_slice(values.clone(), &[0..n, j..j + 1]);
-                    Self::float_lattice_splat(lattice, points.clone(), column, transfer)
-                })
-                .collect();
+            return crate::fields::sample::lattice_splat_columns_one_by_one::<Self>(
+                lattices, points, values, transfer,
+            );
         }
         let (v, p) = (standard(&values), standard(&points));
         let out = match d {

@@ -305,6 +305,26 @@ pub(crate) fn staggered_lattices(domain: &Domain) -> Vec<SampleLattice> {
         .collect()
 }
 
+/// [`Backend::float_lattice_splat_columns`] one column at a time through
+/// [`Backend::float_lattice_splat`] (the default, and the fallback of backends that interleave
+/// only some cases).
+pub(crate) fn lattice_splat_columns_one_by_one<B: Backend>(
+    lattices: &[SampleLattice],
+    points: B::Float,
+    values: B::Float,
+    transfer: Transfer,
+) -> Result<Vec<(B::Float, B::Float)>> {
+    let n = B::float_shape(&values)[0];
+    lattices
+        .iter()
+        .enumerate()
+        .map(|(j, lattice)| {
+            let column = B::float_slice(values.clone(), &[0..n, j..j + 1]);
+            B::float_lattice_splat(lattice, points.clone(), column, transfer)
+        })
+        .collect()
+}
+
 /// [`Backend::float_lattice_splat`] from tensor operations (the default of every backend).
 pub(crate) fn composite_lattice_splat<B: Backend>(
     lattice: &SampleLattice,
@@ -594,7 +614,11 @@ fn mark_nearest_cells<const D: usize>(lattice: &SampleLattice, points: &[f32], m
         let index = ((x - origin[axis]) * inverse[axis])
             .max(0.0)
             .min(upper[axis]);
-        ((index + 0.5) as i32).min(last[axis]) * strides[axis]
+        // SAFETY: `index + 0.5` is finite and in `[0.5, shape − 0.5]`, within `i32` (the cell
+        // count is checked), so the unchecked conversion is exact truncation; the saturating
+        // `as i32` adds fix-ups per lane that keep the loop scalar.
+        let whole: i32 = unsafe { (index + 0.5).to_int_unchecked() };
+        whole.min(last[axis]) * strides[axis]
     };
     let blocks = points.chunks_exact(D * LANES);
     let rest = blocks.remainder();

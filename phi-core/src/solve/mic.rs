@@ -77,6 +77,21 @@ impl Far {
         sum
     }
 
+    /// [`Self::row_dot`] where the layout is `W` wide, [`Self::row_dot_any`] otherwise (the
+    /// kernels are instantiated for the common widths and one fallback).
+    ///
+    /// # Safety
+    /// As [`Self::row_dot`].
+    #[inline(always)]
+    unsafe fn row_sum<const W: usize>(&self, i: usize, x: &[f64]) -> f64 {
+        if W == self.width {
+            // SAFETY: the caller's contract.
+            unsafe { self.row_dot::<W>(i, x) }
+        } else {
+            self.row_dot_any(i, x)
+        }
+    }
+
     /// [`Self::row_dot`] for any width, with bounds checks.
     fn row_dot_any(&self, i: usize, x: &[f64]) -> f64 {
         let w = self.width;
@@ -161,21 +176,17 @@ impl SplitMatrix {
             1 => self.add_far::<1>(x, y),
             2 => self.add_far::<2>(x, y),
             3 => self.add_far::<3>(x, y),
-            4 => self.add_far::<4>(x, y),
-            _ => {
-                for (i, y) in y.iter_mut().enumerate() {
-                    *y += self.far.row_dot_any(i, x);
-                }
-            }
+            _ => self.add_far::<MAX_FAR>(x, y),
         }
     }
 
-    /// `y += F x` for the far entries `F`, `W` per row; `x` and `y` have one entry per row.
+    /// `y += F x` for the far entries `F` ([`Far::row_sum`] with `W`); `x` and `y` have one
+    /// entry per row.
     fn add_far<const W: usize>(&self, x: &[f64], y: &mut [f64]) {
         assert!(x.len() == self.diagonal.len());
         for (i, y) in y.iter_mut().enumerate() {
             // SAFETY: `x` has one entry per row (asserted above).
-            *y += unsafe { self.far.row_dot::<W>(i, x) };
+            *y += unsafe { self.far.row_sum::<W>(i, x) };
         }
     }
 }
@@ -213,7 +224,7 @@ impl ModifiedIncompleteCholesky {
         let mut diagonal = original.clone();
         let mut previous = split.previous.clone();
         let mut values = split.far.values.clone();
-        let mut pivots = vec![0.0f64; n];
+        let mut inverse_pivots = vec![0.0f64; n];
         // Where the pair (i, j), i < j, sits: `Some(None)` on the coupling `previous[j]`,
         // `Some(Some(t))` in far slot `t` of row i, `None` outside the pattern.
         let pattern = &split.far.values;
@@ -238,8 +249,8 @@ impl ModifiedIncompleteCholesky {
             } else {
                 original[k]
             };
-            pivots[k] = d;
             let inverse = 1.0 / d;
+            inverse_pivots[k] = inverse;
             let mut len = 0;
             if k + 1 < n && split.previous[k + 1] != 0.0 {
                 column[len] = (k + 1, previous[k + 1]);
@@ -309,7 +320,6 @@ impl ModifiedIncompleteCholesky {
                 }
             }
         }
-        let inverse_pivots: Vec<f64> = pivots.iter().map(|d| 1.0 / d).collect();
         if inverse_pivots
             .iter()
             .chain(&previous)
@@ -361,15 +371,8 @@ impl ModifiedIncompleteCholesky {
     fn forward<const W: usize>(&self, r: &[f64], z: &mut [f64]) {
         let n = self.previous.len();
         assert!(r.len() == n && z.len() == n);
-        let exact = W == self.lower.width;
-        let far = |i: usize, z: &[f64]| {
-            if exact {
-                // SAFETY: `z` has one entry per row (asserted above).
-                unsafe { self.lower.row_dot::<W>(i, z) }
-            } else {
-                self.lower.row_dot_any(i, z)
-            }
-        };
+        // SAFETY: `z` has one entry per row (asserted above).
+        let far = |i: usize, z: &[f64]| unsafe { self.lower.row_sum::<W>(i, z) };
         let c = &self.previous;
         let mut last = 0.0;
         for i in (0..n - n % 2).step_by(2) {
@@ -393,15 +396,8 @@ impl ModifiedIncompleteCholesky {
     fn backward<const W: usize>(&self, r: &[f64], z: &mut [f64]) -> f64 {
         let n = self.previous.len();
         assert!(z.len() == n && r.len() == n);
-        let exact = W == self.upper.width;
-        let far = |i: usize, z: &[f64]| {
-            if exact {
-                // SAFETY: `z` has one entry per row (asserted above).
-                unsafe { self.upper.row_dot::<W>(i, z) }
-            } else {
-                self.upper.row_dot_any(i, z)
-            }
-        };
+        // SAFETY: `z` has one entry per row (asserted above).
+        let far = |i: usize, z: &[f64]| unsafe { self.upper.row_sum::<W>(i, z) };
         let c = &self.previous;
         let d = &self.inverse_pivots;
         let mut last = 0.0;
