@@ -693,15 +693,27 @@ fn frontier_kernel<const D: usize>(
         }
         values[0]
     };
-    // The first frontier: the invalid sites that see a valid one.
+    // The first frontier: the invalid sites that see a valid one. Whether a site sees one is the
+    // count of valid sites in its box, summed axis by axis over the whole padded array (long
+    // vectorised runs; each pass covers every site whose neighbours along its axis lie in the
+    // array, which includes all that a later pass reads for an interior site).
+    let mut seen = pm.clone();
+    let mut pass = vec![0.0f32; padded_sites];
+    for &stride in &strides {
+        let n = padded_sites;
+        for ((out, below), (centre, above)) in pass[stride..n - stride]
+            .iter_mut()
+            .zip(&seen[..n - 2 * stride])
+            .zip(seen[stride..n - stride].iter().zip(&seen[2 * stride..]))
+        {
+            *out = (below + centre) + above;
+        }
+        std::mem::swap(&mut seen, &mut pass);
+    }
     let mut frontier = Vec::new();
     for (_, at) in row_starts() {
         for site in at..at + row {
-            if pm[site] == 0.0
-                && box_offset
-                    .iter()
-                    .any(|&o| pm[site.wrapping_add_signed(o)] != 0.0)
-            {
+            if pm[site] == 0.0 && seen[site] != 0.0 {
                 queued[site] = true;
                 frontier.push(site);
             }
@@ -1167,6 +1179,12 @@ struct FixedIndexer<const D: usize> {
     /// `strides` in `i32`, for the vectorised lower corners: a lattice has at most `i32::MAX`
     /// samples (checked in `new`), so every flat index fits.
     strides_i32: [i32; D],
+    /// `highest_base` and `strides` in `f32`, for lattices whose flat indices are all exact in
+    /// `f32` (`exact_in_f32`): there the lower corners need no integer multiplications or
+    /// minima, which x86-64's baseline SSE2 lacks for 32-bit lanes.
+    highest_base_f32: [f32; D],
+    strides_f32: [f32; D],
+    exact_in_f32: bool,
 }
 
 impl<const D: usize> FixedIndexer<D> {
@@ -1184,6 +1202,10 @@ impl<const D: usize> FixedIndexer<D> {
             highest_base: std::array::from_fn(|axis| indexer.highest_base[axis] as i32),
             strides: std::array::from_fn(|axis| indexer.strides[axis]),
             strides_i32: std::array::from_fn(|axis| indexer.strides[axis] as i32),
+            highest_base_f32: std::array::from_fn(|axis| indexer.highest_base[axis] as f32),
+            strides_f32: std::array::from_fn(|axis| indexer.strides[axis] as f32),
+            // Every flat index and every partial sum of one is below the sample count.
+            exact_in_f32: indexer.shape.iter().product::<usize>() <= 1 << f32::MANTISSA_DIGITS,
         }
     }
 
@@ -1237,6 +1259,28 @@ impl<const D: usize> FixedIndexer<D> {
     #[allow(clippy::needless_range_loop)] // index loops over lanes vectorise
     fn lower_corners(&self, x: &[Lane; D]) -> ([u32; LANES], [Lane; D]) {
         let mut fraction = [[0.0f32; LANES]; D];
+        if self.exact_in_f32 {
+            // The same corners in `f32`: `trunc(min(t, highest))` is `min(trunc(t), highest)`
+            // for `t ≥ 0` and an integer `highest`, and the flat index and its partial sums are
+            // integers below `2^24`, so every product and sum is exact.
+            let mut flat = [0.0f32; LANES];
+            for axis in 0..D {
+                for i in 0..LANES {
+                    let t = self.continuous(x[axis][i], axis);
+                    let capped = t.min(self.highest_base_f32[axis]);
+                    // SAFETY: `t` is clamped into `[0, shape − 1]` by `continuous` (a NaN
+                    // coordinate becomes 0 there), so `capped` is finite and fits `i32`.
+                    let b = unsafe { capped.to_int_unchecked::<i32>() } as f32;
+                    flat[i] += b * self.strides_f32[axis];
+                    fraction[axis][i] = t - b;
+                }
+            }
+            // SAFETY: every entry is an exact non-negative integer below `2^24`.
+            return (
+                flat.map(|f| unsafe { f.to_int_unchecked::<i32>() } as u32),
+                fraction,
+            );
+        }
         let mut flat = [0i32; LANES];
         for axis in 0..D {
             for i in 0..LANES {
