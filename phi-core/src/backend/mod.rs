@@ -632,6 +632,24 @@ pub trait Backend: Copy + Clone + Debug + Default + Send + Sync + 'static {
         crate::fields::sample::composite_lattice_sample::<Self>(lattice, values, points)
     }
 
+    /// [`Backend::float_lattice_sample`] of several one-channel lattices at the same
+    /// `points [N, d]`: column `j` of the result `[N, k]` interpolates `components[j]`
+    /// (`[samples_j, 1]`) on `lattices[j]` (`k` lattices; the components of a staggered grid).
+    /// The default samples the lattices one by one and joins the columns; a backend may
+    /// interleave them, with the same values.
+    ///
+    /// # Errors
+    /// Only shape errors, which the callers in [`crate::fields`] rule out.
+    fn float_lattice_sample_columns(
+        lattices: &[crate::fields::SampleLattice],
+        components: &[Self::Float],
+        points: Self::Float,
+    ) -> Result<Self::Float> {
+        crate::fields::sample::composite_lattice_sample_columns::<Self>(
+            lattices, components, points,
+        )
+    }
+
     /// Particle → grid transfer onto the samples of `lattice`: `(Σ w v, Σ w)` with shapes
     /// `([samples, c], [samples, 1])` for `values [N, c]` at `points [N, d]`, where `w` are the
     /// tent weights of the `2^d` surrounding samples ([`Transfer::Linear`](crate::fields::Transfer),

@@ -449,6 +449,33 @@ impl Backend for NdArray {
         Ok(from_vec(out, &[n, c]))
     }
 
+    fn float_lattice_sample_columns(
+        lattices: &[SampleLattice],
+        components: &[Self::Float],
+        points: Self::Float,
+    ) -> Result<Self::Float> {
+        let d = lattices.len();
+        let fused = (1..=3).contains(&d)
+            && points.shape()[1] == d
+            && lattices.iter().all(|l| l.shape.len() == d)
+            && components.iter().all(|c| c.shape()[1] == 1);
+        if !fused {
+            return crate::fields::sample::composite_lattice_sample_columns::<Self>(
+                lattices, components, points,
+            );
+        }
+        let n = points.shape()[0];
+        let p = standard(&points);
+        let values: Vec<Cow<'_, [f32]>> = components.iter().map(standard).collect();
+        let values: Vec<&[f32]> = values.iter().map(|v| &v[..]).collect();
+        let out = match d {
+            1 => sample_columns_kernel::<1>(lattices, &values, &p),
+            2 => sample_columns_kernel::<2>(lattices, &values, &p),
+            _ => sample_columns_kernel::<3>(lattices, &values, &p),
+        };
+        Ok(from_vec(out, &[n, d]))
+    }
+
     fn float_lattice_splat(
         lattice: &SampleLattice,
         points: Self::Float,
@@ -883,6 +910,25 @@ fn concat<T: Copy + Default + Send + Sync>(tensors: Vec<Tensor<T>>, axis: usize)
     let mut data = vec![T::default(); out_len(&shape)];
     if row == 0 {
         return from_vec(data, &shape);
+    }
+    // Two or three columns (per-axis samples joined into points): interleaved in one pass.
+    if parts.iter().all(|(_, block)| *block == 1) {
+        let columns: Vec<&[T]> = parts.iter().map(|(part, _)| &part[..]).collect();
+        match columns[..] {
+            [a, b] => {
+                for ((out, &a), &b) in data.chunks_exact_mut(2).zip(a).zip(b) {
+                    out.copy_from_slice(&[a, b]);
+                }
+                return from_vec(data, &shape);
+            }
+            [a, b, c] => {
+                for (((out, &a), &b), &c) in data.chunks_exact_mut(3).zip(a).zip(b).zip(c) {
+                    out.copy_from_slice(&[a, b, c]);
+                }
+                return from_vec(data, &shape);
+            }
+            _ => {}
+        }
     }
     let mut at = 0;
     for (part, block) in &parts {
@@ -1410,6 +1456,34 @@ fn for_each_block<const D: usize>(p: &[f32], mut f: impl FnMut(usize, &[Lane; D]
         }
         f(block * LANES, &x, points.len() / D);
     }
+}
+
+/// [`Backend::float_lattice_sample_columns`] for `D` one-channel lattices of dimension `D` (a
+/// staggered grid's components) at points `p [N, D]`: `[N, D]`, each column as [`sample_kernel`]
+/// computes it, written in place of the composite's joined columns.
+fn sample_columns_kernel<const D: usize>(
+    lattices: &[SampleLattice],
+    values: &[&[f32]],
+    p: &[f32],
+) -> Vec<f32> {
+    let components: Vec<ComponentSampler<'_, D>> = lattices
+        .iter()
+        .zip(values)
+        .map(|(lattice, values)| ComponentSampler::new(&LatticeIndexer::new(lattice), values))
+        .collect();
+    let mut out = vec![0.0f32; p.len()];
+    for_each_block::<D>(p, |first, x, count| {
+        let columns: [Lane; D] = std::array::from_fn(|axis| components[axis].sample_block(x));
+        for (i, o) in out[first * D..(first + count) * D]
+            .chunks_exact_mut(D)
+            .enumerate()
+        {
+            for (axis, o) in o.iter_mut().enumerate() {
+                *o = columns[axis][i];
+            }
+        }
+    });
+    out
 }
 
 /// Points moved through a staggered velocity as

@@ -272,17 +272,12 @@ pub(crate) fn composite_advect_points<B: Backend>(
     integrator: Integrator,
 ) -> Result<B::Float> {
     let points = Tensor::<B>::from_primitive(points);
-    let components: Vec<Tensor<B>> = components
-        .iter()
-        .map(|c| Tensor::from_primitive(c.clone()))
-        .collect();
     let velocity = |at: &Tensor<B>| -> Result<Tensor<B>> {
-        let columns = lattices
-            .iter()
-            .zip(&components)
-            .map(|(lattice, values)| lattice.sample(values, at))
-            .collect::<Result<Vec<_>>>()?;
-        Tensor::concat(&columns, 1)
+        Ok(Tensor::from_primitive(B::float_lattice_sample_columns(
+            lattices,
+            components,
+            at.primitive().clone(),
+        )?))
     };
     let moved = match integrator {
         Integrator::Euler => &points + &(velocity(&points)? * dt),
@@ -296,6 +291,22 @@ pub(crate) fn composite_advect_points<B: Backend>(
         }
     };
     Ok(moved.into_primitive())
+}
+
+/// [`Backend::float_lattice_sample_columns`] one lattice at a time through
+/// [`Backend::float_lattice_sample`], the columns joined (the default).
+pub(crate) fn composite_lattice_sample_columns<B: Backend>(
+    lattices: &[SampleLattice],
+    components: &[B::Float],
+    points: B::Float,
+) -> Result<B::Float> {
+    let points = Tensor::<B>::from_primitive(points);
+    let columns = lattices
+        .iter()
+        .zip(components)
+        .map(|(lattice, values)| lattice.sample(&Tensor::from_primitive(values.clone()), &points))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(Tensor::concat(&columns, 1)?.into_primitive())
 }
 
 /// The lattices of the components of a staggered grid on `domain`.
@@ -405,13 +416,27 @@ pub fn sample_staggered<B: Backend>(
 ) -> Result<Tensor<B>> {
     let domain = velocity.domain();
     check_points("sample_staggered", domain, points)?;
-    let columns = (0..domain.dim())
-        .map(|axis| {
-            let n = points.shape()[0];
-            sample_face_component(velocity.component(axis), domain, axis, points)?.reshape(&[n, 1])
+    let lattices = staggered_lattices(domain);
+    let components = lattices
+        .iter()
+        .enumerate()
+        .map(|(axis, lattice)| {
+            let component = velocity.component(axis);
+            if component.shape() != lattice.shape {
+                return Err(TensorError::InvalidArgument {
+                    op: "sample_staggered",
+                    shape: component.shape(),
+                    reason: format!("component {axis} must have shape {:?}", lattice.shape),
+                });
+            }
+            Ok(component.reshape(&[component.numel(), 1])?.into_primitive())
         })
         .collect::<Result<Vec<_>>>()?;
-    Tensor::concat(&columns, 1)
+    Ok(Tensor::from_primitive(B::float_lattice_sample_columns(
+        &lattices,
+        &components,
+        points.primitive().clone(),
+    )?))
 }
 
 /// A centred grid `[res..., c]` sampled at `points [N, d]` by multilinear interpolation of the

@@ -346,5 +346,39 @@ fn fused_lattice_transfers_match_the_composite_bit_for_bit() {
                 assert_eq!(bits(weights), bits(&plain_weights), "{case}");
             }
         }
+        // All components sampled in one call: each column as the composite samples it alone.
+        let components: Vec<_> = lattices
+            .iter()
+            .map(|lattice| {
+                let samples: usize = lattice.shape.iter().product();
+                let grid: Vec<f32> = (0..samples).map(|_| rng.random_range(-3.0..3.0)).collect();
+                T::from_vec(grid, &[samples, 1], &device())
+                    .unwrap()
+                    .into_primitive()
+            })
+            .collect();
+        let fused = T::from_primitive(
+            NdArray::float_lattice_sample_columns(
+                &lattices,
+                &components,
+                points.primitive().clone(),
+            )
+            .unwrap(),
+        );
+        assert_eq!(fused.shape(), [n, d]);
+        for (j, (lattice, grid)) in lattices.iter().zip(&components).enumerate() {
+            let plain = sample::composite_lattice_sample::<NdArray>(
+                lattice,
+                grid.clone(),
+                points.primitive().clone(),
+            )
+            .unwrap();
+            let column = fused.narrow(1, j..j + 1).unwrap().into_primitive();
+            assert_eq!(
+                bits(&column),
+                bits(&plain),
+                "column sample {res:?} component {j}"
+            );
+        }
     }
 }
