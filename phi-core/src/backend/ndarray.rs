@@ -737,12 +737,26 @@ fn frontier_kernel<const D: usize>(
         }
         std::mem::swap(&mut seen, &mut pass);
     }
+    // Most runs of sites hold no frontier site: each run of 16 is tested at once (vectorised),
+    // and only runs with one are walked site by site.
     let mut frontier = Vec::new();
     for (_, at) in row_starts() {
-        for site in at..at + row {
-            if pm[site] == 0.0 && seen[site] != 0.0 {
-                queued[site] = true;
-                frontier.push(site);
+        for start in (at..at + row).step_by(16) {
+            let end = (start + 16).min(at + row);
+            let hit = pm[start..end]
+                .iter()
+                .zip(&seen[start..end])
+                .fold(false, |hit, (&m, &count)| {
+                    hit | ((m == 0.0) & (count != 0.0))
+                });
+            if !hit {
+                continue;
+            }
+            for site in start..end {
+                if pm[site] == 0.0 && seen[site] != 0.0 {
+                    queued[site] = true;
+                    frontier.push(site);
+                }
             }
         }
     }

@@ -103,6 +103,21 @@ impl Far {
     }
 }
 
+/// Whether every value is finite: `0 · x` is `±0` for finite `x` and NaN otherwise, summed in
+/// independent lanes (a short-circuiting test per value would not vectorise).
+fn all_finite(values: &[f64]) -> bool {
+    const LANES: usize = 8;
+    let mut sums = [0.0f64; LANES];
+    let blocks = values.chunks_exact(LANES);
+    let rest = blocks.remainder();
+    for block in blocks {
+        for (sum, &x) in sums.iter_mut().zip(block) {
+            *sum += x * 0.0;
+        }
+    }
+    rest.iter().map(|x| x * 0.0).sum::<f64>() + sums.iter().sum::<f64>() == 0.0
+}
+
 /// A symmetric matrix split for the conjugate-gradient product: its diagonal, the couplings
 /// between consecutive rows (contiguous loads) and the rest ([`Far`]).
 #[derive(Debug)]
@@ -119,9 +134,18 @@ impl SplitMatrix {
     /// outside the diagonal and its two neighbours, or for more than `u32::MAX` rows.
     pub(crate) fn new(matrix: &SparseMatrix) -> Option<Self> {
         let n = matrix.nrows();
+        let (row_ptr, cols, values) = (matrix.row_ptr(), matrix.col_indices(), matrix.values());
         let is_far = |i: usize, j: usize| j + 1 < i || j > i + 1;
+        let row = |i: usize| {
+            let range = row_ptr[i]..row_ptr[i + 1];
+            cols[range.clone()].iter().copied().zip(&values[range])
+        };
         let width = (0..n)
-            .map(|i| matrix.row(i).filter(|&(j, _)| is_far(i, j)).count())
+            .map(|i| {
+                row(i)
+                    .map(|(j, _)| usize::from(is_far(i, j)))
+                    .sum::<usize>()
+            })
             .max()
             .unwrap_or(0);
         let mut far = Far::padding(n, width)?;
@@ -129,7 +153,7 @@ impl SplitMatrix {
         let mut previous = vec![0.0; n];
         for i in 0..n {
             let mut slot = i * width;
-            for (j, v) in matrix.row(i) {
+            for (j, &v) in row(i) {
                 if j == i {
                     diagonal[i] = v;
                 } else if j + 1 == i {
@@ -212,9 +236,10 @@ impl ModifiedIncompleteCholesky {
         let w = split.far.width;
         let cols = &split.far.cols;
         let original = &split.diagonal;
-        if original.iter().any(|d| !(d.is_finite() && *d > 0.0))
-            || split.previous.iter().any(|v| !v.is_finite())
-            || split.far.values.iter().any(|v| !v.is_finite())
+        if !original.iter().all(|&d| d > 0.0)
+            || !all_finite(original)
+            || !all_finite(&split.previous)
+            || !all_finite(&split.far.values)
         {
             return None;
         }
@@ -320,12 +345,7 @@ impl ModifiedIncompleteCholesky {
                 }
             }
         }
-        if inverse_pivots
-            .iter()
-            .chain(&previous)
-            .chain(&upper.values)
-            .any(|v| !v.is_finite())
-        {
+        if !(all_finite(&inverse_pivots) && all_finite(&previous) && all_finite(&upper.values)) {
             return None;
         }
         Some(Self {
