@@ -575,16 +575,14 @@ impl Backend for NdArray {
                 cells,
             );
         };
-        let mut v = standard(&values).into_owned();
-        let mut mask: Vec<f32> = standard(&valid)
-            .iter()
-            .map(|&m| if m != 0.0 { 1.0 } else { 0.0 })
-            .collect();
         let grid = &shape[..spatial_dims];
         if mask_channels == 1 {
-            extrapolate_frontier(&mut v, &mut mask, grid, channels, cells);
+            let (v, mask) =
+                extrapolate_frontier(&standard(&values), &standard(&valid), grid, channels, cells);
             return Ok((from_vec(v, &shape), from_vec(mask, &mask_shape)));
         }
+        let mut v = standard(&values).into_owned();
+        let mut mask: Vec<f32> = standard(&valid).iter().map(|&m| unit_mask(m)).collect();
         let mut sum = vec![0.0f32; sites * channels];
         let mut count = vec![0.0f32; sites * mask_channels];
         let mut scratch = Vec::new();
@@ -637,13 +635,14 @@ impl Backend for NdArray {
 /// takes its box sums in the order [`box_sum_in_place`] adds them over the whole grid (axis 0
 /// first, `(below + centre) + above`, zeros beyond the edges), so the values are bit for bit the
 /// composite's, at a cost that follows the frontier instead of the grid.
+/// Takes the values and the mask (any nonzero entry is valid) and returns both grown.
 fn extrapolate_frontier(
-    v: &mut [f32],
-    mask: &mut [f32],
+    v: &[f32],
+    mask: &[f32],
     grid: &[usize],
     channels: usize,
     cells: usize,
-) {
+) -> (Vec<f32>, Vec<f32>) {
     match grid.len() {
         1 => frontier_kernel::<1>(v, mask, grid, channels, cells),
         2 => frontier_kernel::<2>(v, mask, grid, channels, cells),
@@ -658,15 +657,15 @@ fn extrapolate_frontier(
 /// adds beyond the edge.
 #[allow(clippy::needless_range_loop)] // box positions index several arrays
 fn frontier_kernel<const D: usize>(
-    v: &mut [f32],
-    mask: &mut [f32],
+    v: &[f32],
+    mask: &[f32],
     grid: &[usize],
     channels: usize,
     cells: usize,
-) {
+) -> (Vec<f32>, Vec<f32>) {
     let sites: usize = grid.iter().product();
     if sites == 0 || cells == 0 {
-        return;
+        return (v.to_vec(), mask.iter().map(|&m| unit_mask(m)).collect());
     }
     let padded: [usize; D] = std::array::from_fn(|axis| grid[axis] + 2);
     let mut strides = [1usize; D];
@@ -692,7 +691,9 @@ fn frontier_kernel<const D: usize>(
     for (site, at) in row_starts() {
         pv[at * channels..(at + row) * channels]
             .copy_from_slice(&v[site * channels..(site + row) * channels]);
-        pm[at..at + row].copy_from_slice(&mask[site..site + row]);
+        for (m, &valid) in pm[at..at + row].iter_mut().zip(&mask[site..site + row]) {
+            *m = unit_mask(valid);
+        }
         queued[at..at + row].fill(false);
     }
     // The 3^D box around a site, itself included: per box position `k` (row-major over the
@@ -804,11 +805,19 @@ fn frontier_kernel<const D: usize>(
         }
         std::mem::swap(&mut frontier, &mut next);
     }
-    for (site, at) in row_starts() {
-        v[site * channels..(site + row) * channels]
-            .copy_from_slice(&pv[at * channels..(at + row) * channels]);
-        mask[site..site + row].copy_from_slice(&pm[at..at + row]);
+    let mut values = Vec::with_capacity(sites * channels);
+    let mut valid = Vec::with_capacity(sites);
+    for (_, at) in row_starts() {
+        values.extend_from_slice(&pv[at * channels..(at + row) * channels]);
+        valid.extend_from_slice(&pm[at..at + row]);
     }
+    (values, valid)
+}
+
+/// A mask entry as `0` or `1` (any nonzero entry is valid).
+#[inline(always)]
+fn unit_mask(m: f32) -> f32 {
+    if m != 0.0 { 1.0 } else { 0.0 }
 }
 
 /// Replaces `data` (`[grid..., channels]`, row-major) by its sum over the `3^d` box around each
