@@ -863,13 +863,30 @@ fn pcg(
     })
 }
 
-/// `x += α p`, `r −= α q`; returns `‖r‖₂`.
+/// `x += α p`, `r −= α q`; returns `‖r‖₂`, summed in the same pass and in the same order as
+/// [`dot`] sums (the remainder into the first lane, then whole blocks lane by lane).
 fn update_and_norm(alpha: f64, p: &[f64], q: &[f64], x: &mut [f64], r: &mut [f64]) -> f64 {
-    for ((x, r), (p, q)) in x.iter_mut().zip(r.iter_mut()).zip(p.iter().zip(q)) {
-        *x += alpha * p;
-        *r -= alpha * q;
+    let n = r.len();
+    assert!(p.len() == n && q.len() == n && x.len() == n);
+    let whole = n - n % LANES;
+    let mut sums = [0.0; LANES];
+    for i in whole..n {
+        x[i] += alpha * p[i];
+        r[i] -= alpha * q[i];
+        sums[0] += r[i] * r[i];
     }
-    norm(r)
+    let blocks = x[..whole]
+        .chunks_exact_mut(LANES)
+        .zip(r[..whole].chunks_exact_mut(LANES))
+        .zip(p.chunks_exact(LANES).zip(q.chunks_exact(LANES)));
+    for ((x, r), (p, q)) in blocks {
+        for k in 0..LANES {
+            x[k] += alpha * p[k];
+            r[k] -= alpha * q[k];
+            sums[k] += r[k] * r[k];
+        }
+    }
+    sums.iter().sum::<f64>().sqrt()
 }
 
 /// The adjoint solve of a backward pass, `Aᵀ y = g`, for `f32` gradients: first with `options`;
