@@ -634,8 +634,8 @@ impl Backend for NdArray {
 /// layer over the frontier only: the invalid sites next to the valid region. Each frontier site
 /// takes its box sums in the order [`box_sum_in_place`] adds them over the whole grid (axis 0
 /// first, `(below + centre) + above`, zeros beyond the edges), so the values are bit for bit the
-/// composite's, at a cost that follows the frontier instead of the grid.
-/// Takes the values and the mask (any nonzero entry is valid) and returns both grown.
+/// composite's, at a cost that follows the frontier instead of the grid. Takes the values and
+/// the mask (any nonzero entry is valid) and returns both grown.
 fn extrapolate_frontier(
     v: &[f32],
     mask: &[f32],
