@@ -8,6 +8,7 @@ use phi_core::fields::{
     sample_staggered_gradient, valid_faces,
 };
 use phi_core::solve::{SolveOptions, SolveStats};
+use phi_core::tensor::all_finite;
 use phi_core::{Tensor, TensorError};
 use phi_geom::{Geometry, Obstacle, PushDirection};
 
@@ -851,23 +852,6 @@ impl<B: Backend> FlipSimulation<B> {
     }
 }
 
-/// Whether every value is finite. `0 · x` is 0 for a finite `x` and NaN otherwise; the sums run
-/// in lanes over all values without an early exit, so the check (over every particle, every
-/// step) vectorises.
-fn all_finite(values: &[f32]) -> bool {
-    const LANES: usize = 16;
-    let mut sums = [0.0f32; LANES];
-    let blocks = values.chunks_exact(LANES);
-    let rest = blocks.remainder();
-    for block in blocks {
-        for (sum, &x) in sums.iter_mut().zip(block) {
-            *sum += x * 0.0;
-        }
-    }
-    let total = rest.iter().map(|x| x * 0.0).sum::<f32>() + sums.iter().sum::<f32>();
-    total == 0.0
-}
-
 /// The largest distance in cells between `after` and `before` (points `[N, D]`, row-major, all
 /// finite). The square root is taken once, of the largest square (it is monotonic), and the
 /// maximum runs in independent lanes: a running maximum over the points would chain them all.
@@ -933,23 +917,6 @@ fn blocked_faces<B: Backend>(inside: &Tensor<B>) -> Result<Vec<Tensor<B>>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A NaN or an infinity anywhere (in a whole block of lanes or in the remainder) fails the
-    /// check; finite values of any size pass.
-    #[test]
-    fn all_finite_finds_every_non_finite_value() {
-        for n in [0usize, 1, 15, 16, 17, 40] {
-            let values: Vec<f32> = (0..n).map(|i| (i as f32 - 7.0) * 1e30).collect();
-            assert!(all_finite(&values), "n {n}");
-            for at in 0..n {
-                for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
-                    let mut with = values.clone();
-                    with[at] = bad;
-                    assert!(!all_finite(&with), "n {n}, {bad} at {at}");
-                }
-            }
-        }
-    }
 
     /// The largest displacement is the largest Euclidean distance in cells, with anisotropic
     /// cells and with points in the lanes and in the remainder.

@@ -2341,6 +2341,46 @@ mod tests {
         (0..n).map(|x| x as f32).collect()
     }
 
+    /// The lower corners in `f32` (lattices whose flat indices are exact there) equal the
+    /// integer ones, which larger lattices take: points inside, on the upper edges (where the
+    /// corner is capped) and beyond, including NaN, in 1D to 3D.
+    #[test]
+    fn lower_corners_in_f32_equal_the_integer_ones() {
+        fn check<const D: usize>(shape: &[usize]) {
+            let lattice = SampleLattice {
+                origin: vec![0.25; D],
+                spacing: (0..D).map(|axis| 0.5 + 0.25 * axis as f32).collect(),
+                shape: shape.to_vec(),
+            };
+            let fast = FixedIndexer::<D>::new(&LatticeIndexer::new(&lattice));
+            assert!(fast.exact_in_f32);
+            let integer = FixedIndexer::<D> {
+                exact_in_f32: false,
+                ..FixedIndexer::<D>::new(&LatticeIndexer::new(&lattice))
+            };
+            let mut x = [[0.0f32; LANES]; D];
+            for (axis, lane) in x.iter_mut().enumerate() {
+                let (step, upper) = (lattice.spacing[axis], shape[axis] as f32 - 1.0);
+                for (i, v) in lane.iter_mut().enumerate() {
+                    // Sample positions, halfway points, the upper edge and beyond.
+                    *v = lattice.origin[axis] + step * (i as f32 * 0.5 - 1.0).min(upper + 1.0);
+                }
+                lane[LANES - 2] = lattice.origin[axis] + step * upper;
+            }
+            x[0][LANES - 1] = f32::NAN;
+            let (flat, fraction) = fast.lower_corners(&x);
+            let (flat_integer, fraction_integer) = integer.lower_corners(&x);
+            assert_eq!(flat, flat_integer, "{shape:?}");
+            let bits = |f: &[Lane; D]| f.map(|lane| lane.map(f32::to_bits));
+            assert_eq!(bits(&fraction), bits(&fraction_integer), "{shape:?}");
+        }
+        check::<1>(&[9]);
+        check::<1>(&[1]);
+        check::<2>(&[7, 5]);
+        check::<2>(&[6, 1]);
+        check::<3>(&[4, 6, 5]);
+    }
+
     /// Reference broadcasting by index arithmetic.
     fn reference_binary(
         a: &[f32],

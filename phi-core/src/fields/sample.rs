@@ -375,6 +375,24 @@ fn check_points<B: Backend>(op: &'static str, domain: &Domain, points: &Tensor<B
     Ok(())
 }
 
+/// `component` as `[samples, 1]` on `lattice`, the lattice of staggered component `axis`; an
+/// error naming `op` where its shape is not the lattice's.
+fn component_column<B: Backend>(
+    op: &'static str,
+    component: &Tensor<B>,
+    lattice: &SampleLattice,
+    axis: usize,
+) -> Result<Tensor<B>> {
+    if component.shape() != lattice.shape {
+        return Err(TensorError::InvalidArgument {
+            op,
+            shape: component.shape(),
+            reason: format!("component {axis} must have shape {:?}", lattice.shape),
+        });
+    }
+    component.reshape(&[component.numel(), 1])
+}
+
 /// One staggered component (or any tensor laid out on the faces of `axis`) sampled at
 /// `points [N, d]` by multilinear interpolation of its face samples: `[N]`.
 ///
@@ -389,15 +407,8 @@ pub fn sample_face_component<B: Backend>(
 ) -> Result<Tensor<B>> {
     check_points("sample_face_component", domain, points)?;
     let lattice = SampleLattice::of(domain, Some(axis));
-    if component.shape() != lattice.shape {
-        return Err(TensorError::InvalidArgument {
-            op: "sample_face_component",
-            shape: component.shape(),
-            reason: format!("component {axis} must have shape {:?}", lattice.shape),
-        });
-    }
+    let flat = component_column("sample_face_component", component, &lattice, axis)?;
     let n = points.shape()[0];
-    let flat = component.reshape(&[component.numel(), 1])?;
     lattice.sample(&flat, points)?.reshape(&[n])
 }
 
@@ -421,15 +432,9 @@ pub fn sample_staggered<B: Backend>(
         .iter()
         .enumerate()
         .map(|(axis, lattice)| {
-            let component = velocity.component(axis);
-            if component.shape() != lattice.shape {
-                return Err(TensorError::InvalidArgument {
-                    op: "sample_staggered",
-                    shape: component.shape(),
-                    reason: format!("component {axis} must have shape {:?}", lattice.shape),
-                });
-            }
-            Ok(component.reshape(&[component.numel(), 1])?.into_primitive())
+            let column =
+                component_column("sample_staggered", velocity.component(axis), lattice, axis)?;
+            Ok(column.into_primitive())
         })
         .collect::<Result<Vec<_>>>()?;
     Ok(Tensor::from_primitive(B::float_lattice_sample_columns(
@@ -696,13 +701,7 @@ pub fn sample_face_component_gradient<B: Backend>(
 ) -> Result<Tensor<B>> {
     check_points("sample_face_component_gradient", domain, points)?;
     let lattice = SampleLattice::of(domain, Some(axis));
-    if component.shape() != lattice.shape {
-        return Err(TensorError::InvalidArgument {
-            op: "sample_face_component_gradient",
-            shape: component.shape(),
-            reason: format!("component {axis} must have shape {:?}", lattice.shape),
-        });
-    }
+    let flat = component_column("sample_face_component_gradient", component, &lattice, axis)?;
     let d = lattice.dim();
     let n = points.shape()[0];
     let device = points.device();
@@ -738,7 +737,6 @@ pub fn sample_face_component_gradient<B: Backend>(
         moved.push(kept + &(&upper * &one_hot));
     }
     let moved = Tensor::concat(&moved, 0)?;
-    let flat = component.reshape(&[component.numel(), 1])?;
     let planes = lattice
         .sample(&flat, &moved)?
         .reshape(&[axes.len(), 2, n])?;

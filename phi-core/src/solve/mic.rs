@@ -18,6 +18,7 @@
 //! ([`SplitMatrix`]).
 
 use super::sparse::SparseMatrix;
+use crate::tensor::all_finite;
 
 /// The share of each dropped fill entry moved to the diagonal (Bridson's choice).
 const TAU: f64 = 0.97;
@@ -101,21 +102,6 @@ impl Far {
         }
         sum
     }
-}
-
-/// Whether every value is finite: `0 · x` is `±0` for finite `x` and NaN otherwise, summed in
-/// independent lanes (a short-circuiting test per value would not vectorise).
-fn all_finite(values: &[f64]) -> bool {
-    const LANES: usize = 8;
-    let mut sums = [0.0f64; LANES];
-    let blocks = values.chunks_exact(LANES);
-    let rest = blocks.remainder();
-    for block in blocks {
-        for (sum, &x) in sums.iter_mut().zip(block) {
-            *sum += x * 0.0;
-        }
-    }
-    rest.iter().map(|x| x * 0.0).sum::<f64>() + sums.iter().sum::<f64>() == 0.0
 }
 
 /// A symmetric matrix split for the conjugate-gradient product: its diagonal, the couplings
