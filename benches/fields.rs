@@ -12,12 +12,13 @@
 mod common;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use phi_core::Tensor;
+use phi_core::fields::LatticeKernels;
 use phi_core::fields::{
     Boundary, CenteredGrid, Domain, PointCloud, ProjectionMasks, StaggeredGrid, Transfer,
     particles_to_staggered, pressure_projection, sample_staggered,
 };
 use phi_core::solve::{Preconditioner, SolveMethod, SolveOptions};
-use phi_core::{Backend, Tensor};
 
 fn domain(res: &[usize]) -> Domain {
     let upper: Vec<f32> = res.iter().map(|&n| n as f32).collect();
@@ -30,7 +31,7 @@ fn domain(res: &[usize]) -> Domain {
     .expect("a valid domain")
 }
 
-fn bench_backend<B: Backend>(c: &mut Criterion) {
+fn bench_backend<B: LatticeKernels>(c: &mut Criterion) {
     let device = B::default_device();
     let name = B::name();
     for res in [

@@ -8,10 +8,10 @@
 mod common;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use phi_core::Backend;
+use phi_core::fields::LatticeKernels;
 use phi_flip::Scene;
 
-fn bench_backend<B: Backend>(c: &mut Criterion) {
+fn bench_backend<B: LatticeKernels>(c: &mut Criterion) {
     let device = B::default_device();
     for name in ["small32", "block_pool"] {
         let path =

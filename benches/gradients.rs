@@ -16,12 +16,13 @@
 mod common;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use phi_core::{AutodiffBackend, Backend, Tensor};
+use phi_core::fields::LatticeKernels;
+use phi_core::{AutodiffBackend, Tensor};
 use phi_flip::{FlipSimulation, Particles, Scene};
 
 const STEPS: usize = 20;
 
-fn forward<B: Backend>(sim: &FlipSimulation<B>, start: &Particles<B>) -> Tensor<B> {
+fn forward<B: LatticeKernels>(sim: &FlipSimulation<B>, start: &Particles<B>) -> Tensor<B> {
     let mut p = start.clone();
     for step in 0..STEPS {
         p = sim.step(&p, step).expect("a step").0;
@@ -29,7 +30,7 @@ fn forward<B: Backend>(sim: &FlipSimulation<B>, start: &Particles<B>) -> Tensor<
     p.positions
 }
 
-fn forward_backward<B: AutodiffBackend>(
+fn forward_backward<B: AutodiffBackend + LatticeKernels>(
     sim: &FlipSimulation<B>,
     start: &Particles<B>,
 ) -> Tensor<B> {
@@ -73,7 +74,10 @@ fn peak_of(baseline: u64, pass: impl FnOnce()) -> Option<f64> {
     Some(status_kib("VmHWM:").saturating_sub(baseline) as f64 / 1024.0)
 }
 
-fn memory_report<B: AutodiffBackend>(sim: &FlipSimulation<B>, start: &Particles<B>) {
+fn memory_report<B: AutodiffBackend + LatticeKernels>(
+    sim: &FlipSimulation<B>,
+    start: &Particles<B>,
+) {
     let baseline = status_kib("VmRSS:");
     let forward_peak = peak_of(baseline, || common::force(&forward(sim, start)));
     let backward_peak = peak_of(baseline, || common::force(&forward_backward(sim, start)));
@@ -109,7 +113,7 @@ fn memory_report<B: AutodiffBackend>(sim: &FlipSimulation<B>, start: &Particles<
     }
 }
 
-fn bench_backend<B: AutodiffBackend>(c: &mut Criterion) {
+fn bench_backend<B: AutodiffBackend + LatticeKernels>(c: &mut Criterion) {
     let device = B::default_device();
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/small32.toml");
     let scene = Scene::from_file(&path).expect("a shipped scene");

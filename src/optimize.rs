@@ -21,6 +21,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use phi_core::AutodiffBackend;
+use phi_core::fields::LatticeKernels;
 use phi_flip::loss::set_distances;
 use phi_flip::optimize::{IterationRecord, LossSpec};
 use phi_flip::{OptimizeConfig, OptimizeProblem};
@@ -178,7 +179,7 @@ pub struct OptimizeSummary {
 ///
 /// # Errors
 /// Configuration and output errors; an early stop, after its outputs are written.
-pub fn optimize<B: AutodiffBackend>(
+pub fn optimize<B: AutodiffBackend + LatticeKernels>(
     config: &OptimizeConfig,
     options: &OptimizeOptions,
 ) -> Result<OptimizeSummary> {

@@ -18,7 +18,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use phi_core::Backend;
+use phi_core::fields::LatticeKernels;
 use phi_flip::{Particles, Scene};
 use serde::Serialize;
 
@@ -88,7 +88,7 @@ struct RunFile<'a> {
 ///
 /// # Errors
 /// Scene errors, a failing step (non-finite state, solver failure) and I/O errors, with the path.
-pub fn simulate<B: Backend>(scene: &Scene, options: &SimulateOptions) -> Result<RunSummary> {
+pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> Result<RunSummary> {
     let origin = options.scene.display().to_string();
     let device = B::default_device();
     let setup = scene.build::<B>(&origin, &device)?;

@@ -9,6 +9,7 @@
 
 use phi_core::Tensor;
 use phi_core::backend::{Backend, ReduceOp};
+use phi_core::fields::LatticeKernels;
 use phi_core::fields::{Domain, PointCloud, Transfer, particles_to_centered};
 
 use crate::error::{FlipError, Result};
@@ -41,7 +42,7 @@ impl Loss {
     /// # Errors
     /// [`FlipError::InvalidParameter`] (name `target`) for empty sets, a dimension mismatch, or
     /// (L2) different counts.
-    pub fn evaluate<B: Backend>(
+    pub fn evaluate<B: LatticeKernels>(
         &self,
         positions: &Tensor<B>,
         target: &Tensor<B>,
@@ -388,7 +389,7 @@ fn average(into: &mut [f64], new: &[f64]) {
 /// # Errors
 /// [`FlipError::InvalidParameter`] for empty sets, a dimension mismatch with the domain or
 /// `levels = 0`.
-pub fn density_loss<B: Backend>(
+pub fn density_loss<B: LatticeKernels>(
     positions: &Tensor<B>,
     target: &Tensor<B>,
     domain: &Domain,
@@ -451,7 +452,7 @@ pub fn density_grids(domain: &Domain, levels: usize) -> Result<Vec<Domain>> {
 ///
 /// # Errors
 /// Tensor errors only.
-pub fn density<B: Backend>(positions: &Tensor<B>, domain: &Domain) -> Result<Tensor<B>> {
+pub fn density<B: LatticeKernels>(positions: &Tensor<B>, domain: &Domain) -> Result<Tensor<B>> {
     let n = positions.shape()[0];
     let ones = Tensor::ones(&[n, 1], &positions.device());
     let cloud = PointCloud::new(positions.clone(), ones)?;

@@ -31,6 +31,7 @@
 use std::path::Path;
 
 use phi_core::fields::Domain;
+use phi_core::fields::LatticeKernels;
 use phi_core::{AutodiffBackend, Backend, Tensor};
 use phi_geom::Geometry;
 use rand::SeedableRng;
@@ -301,7 +302,7 @@ impl OptimizeConfig {
     /// # Errors
     /// [`FlipError::Scene`] for an invalid configuration, a target that covers no free cell,
     /// or (L2) a target with fewer points than the liquid has particles.
-    pub fn build<B: Backend>(
+    pub fn build<B: LatticeKernels>(
         &self,
         origin: &str,
         device: &B::Device,
@@ -394,7 +395,7 @@ impl OptimizeConfig {
 ///
 /// # Errors
 /// The first step's error.
-pub fn simulate<B: Backend>(
+pub fn simulate<B: LatticeKernels>(
     simulation: &FlipSimulation<B>,
     particles: &Particles<B>,
     steps: usize,
@@ -475,7 +476,7 @@ impl OptimizeOutcome {
     }
 }
 
-impl<B: AutodiffBackend> OptimizeProblem<B> {
+impl<B: AutodiffBackend + LatticeKernels> OptimizeProblem<B> {
     /// The loss, its gradient with respect to the initial positions `positions` `[N, d]`, and
     /// the simulated final positions.
     ///

@@ -39,6 +39,7 @@
 use std::path::Path;
 
 use phi_core::backend::Backend;
+use phi_core::fields::LatticeKernels;
 use phi_core::fields::{Boundary, Domain, Transfer};
 use phi_core::solve::{Preconditioner, SolveMethod, SolveOptions};
 use phi_geom::{Geometry, Obstacle};
@@ -554,7 +555,11 @@ impl Scene {
     ///
     /// # Errors
     /// [`FlipError::Scene`] for an invalid scene or a liquid region that covers no free cell.
-    pub fn build<B: Backend>(&self, origin: &str, device: &B::Device) -> Result<SceneSetup<B>> {
+    pub fn build<B: LatticeKernels>(
+        &self,
+        origin: &str,
+        device: &B::Device,
+    ) -> Result<SceneSetup<B>> {
         self.validate(origin)?;
         let domain = self.domain(origin)?;
         let params = self.params(origin)?;

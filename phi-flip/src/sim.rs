@@ -1,6 +1,7 @@
 //! One FLIP step (thesis algorithm 1) and the simulation that repeats it.
 
 use phi_core::backend::Backend;
+use phi_core::fields::LatticeKernels;
 use phi_core::fields::{
     CenteredGrid, Domain, Integrator, PointCloud, ProjectionMasks, StaggeredGrid, Transfer,
     advect_points, extrapolate_valid, occupied_cells_from_host, particles_to_staggered,
@@ -328,7 +329,7 @@ pub struct FlipSimulation<B: Backend> {
     defaults: SceneParameters<B>,
 }
 
-impl<B: Backend> FlipSimulation<B> {
+impl<B: LatticeKernels> FlipSimulation<B> {
     /// A simulation of `domain` with `obstacles` and `inflows`. `seed` drives the jitter of
     /// inflow particles.
     ///

@@ -2,8 +2,8 @@
 //!
 //! Units are cells (cell size 1) and seconds; gravity is −9.81 cells/s² along the last axis.
 
-use phi_core::Backend;
 use phi_core::backend::ndarray::NdArray;
+use phi_core::fields::LatticeKernels;
 use phi_core::fields::{Boundary, Domain};
 use phi_flip::{FlipParams, FlipSimulation, Particles, Placement, Scene};
 use phi_geom::{Geometry, Obstacle, Rotation};
@@ -34,7 +34,7 @@ fn boxed(lower: &[f32], upper: &[f32]) -> Geometry {
     Geometry::boxed(lower.to_vec(), upper.to_vec()).unwrap()
 }
 
-fn simulation<B: Backend>(
+fn simulation<B: LatticeKernels>(
     res: &[usize],
     dt: f32,
     flip_ratio: f32,
@@ -53,7 +53,7 @@ fn simulation<B: Backend>(
     .unwrap()
 }
 
-fn seed<B: Backend>(
+fn seed<B: LatticeKernels>(
     sim: &FlipSimulation<B>,
     regions: &[Geometry],
     placement: Placement,
@@ -70,7 +70,7 @@ fn seed<B: Backend>(
     Particles::from_host(positions, vec![0.0; n], d, &B::default_device()).unwrap()
 }
 
-fn run<B: Backend>(
+fn run<B: LatticeKernels>(
     sim: &FlipSimulation<B>,
     mut p: Particles<B>,
     steps: usize,
@@ -442,7 +442,7 @@ geometry = { type = "box", lower = [0, 0], upper = [16, 4] }
 }
 
 /// The same scene on every backend gives the same particles over the first 10 steps.
-fn conformance_run<B: Backend>() -> Vec<Vec<f32>> {
+fn conformance_run<B: LatticeKernels>() -> Vec<Vec<f32>> {
     let obstacle = boxed(&[9.0, 6.0], &[13.0, 8.0])
         .rotated(Rotation::degrees(30.0))
         .unwrap();

@@ -7,6 +7,7 @@
 //! differences use `h = 10⁻²` (truncation ≈ `h²`, `f32` round-off ≈ `ε |loss| / h` ≈ 10⁻⁴), so
 //! gradients are held to `3·10⁻³ + 10⁻²·|g|`.
 
+use phi_core::fields::LatticeKernels;
 use phi_core::fields::{
     Boundary, CenteredGrid, PointCloud, StaggeredGrid, Transfer, advect_semi_lagrangian,
     particles_to_centered, particles_to_staggered, sample_staggered,
@@ -29,7 +30,10 @@ const POSITIONS: [f32; 10] = [0.62, 1.37, 1.15, 2.83, 2.38, 0.71, 3.21, 3.12, 1.
 
 /// `Σ W ⊙ PIC(positions, values) + Σ W' ⊙ density`, where PIC is particle → staggered grid
 /// (linear) → particles and the density is the centred transfer weight of the particles.
-fn transfer_loss<B: AutodiffBackend>(positions: &Tensor<B>, values: &Tensor<B>) -> Tensor<B> {
+fn transfer_loss<B: AutodiffBackend + LatticeKernels>(
+    positions: &Tensor<B>,
+    values: &Tensor<B>,
+) -> Tensor<B> {
     let domain = domain(&[4, 4], &[0.0, 0.0], &[4.0, 4.0], Boundary::Open);
     let cloud = PointCloud::new(positions.clone(), values.clone()).unwrap();
     let (grid, _) = particles_to_staggered(&cloud, &domain, Transfer::Linear).unwrap();
@@ -93,7 +97,7 @@ fn transfer_inputs() -> Vec<(Vec<usize>, Vec<f32>)> {
     ]
 }
 
-fn particle_grid_particle_gradients<B: AutodiffBackend>() {
+fn particle_grid_particle_gradients<B: AutodiffBackend + LatticeKernels>() {
     let inputs = transfer_inputs();
     let loss = |t: &[Tensor<B>]| transfer_loss(&t[0], &t[1]);
     let numeric = finite_differences::<B>(&inputs, loss);
@@ -123,7 +127,7 @@ fn advection_inputs() -> Vec<(Vec<usize>, Vec<f32>)> {
     ]
 }
 
-fn advection_loss<B: AutodiffBackend>(t: &[Tensor<B>]) -> Tensor<B> {
+fn advection_loss<B: AutodiffBackend + LatticeKernels>(t: &[Tensor<B>]) -> Tensor<B> {
     let domain = domain(&[5, 4], &[0.0, 0.0], &[5.0, 4.0], Boundary::Closed);
     let field = CenteredGrid::new(t[0].clone(), domain.clone()).unwrap();
     let velocity = StaggeredGrid::new(vec![t[1].clone(), t[2].clone()], domain).unwrap();
@@ -131,7 +135,7 @@ fn advection_loss<B: AutodiffBackend>(t: &[Tensor<B>]) -> Tensor<B> {
     (advected.values() * tensor::<B>(&[5, 4, 1], &values_of(20, 13))).sum()
 }
 
-fn semi_lagrangian_gradients<B: AutodiffBackend>() {
+fn semi_lagrangian_gradients<B: AutodiffBackend + LatticeKernels>() {
     let inputs = advection_inputs();
     let numeric = finite_differences::<B>(&inputs, advection_loss::<B>);
     let analytic = backprop::<B>(&inputs, advection_loss::<B>);

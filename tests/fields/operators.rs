@@ -1,6 +1,7 @@
 //! Differential operators, conversions and advection against exact maths, and the errors of the
 //! fields layer.
 
+use phi_core::fields::LatticeKernels;
 use phi_core::fields::{
     Boundary, CenteredGrid, Domain, PointCloud, StaggeredGrid, Transfer, advect_semi_lagrangian,
     apply_wall_boundaries, centered_to_staggered, curl, divergence, extrapolate_valid, gradient,
@@ -330,7 +331,7 @@ fn wall_boundaries<B: Backend>() {
     assert_eq!(div.values().to_vec(), vec![1.0, 0.0, 0.0, -1.0, 0.0, -1.0]);
 }
 
-fn semi_lagrangian_advection_of_linear_fields<B: Backend>() {
+fn semi_lagrangian_advection_of_linear_fields<B: LatticeKernels>() {
     let domain = domain(&[8, 7], &[0.0, 0.0], &[4.0, 3.5], Boundary::Closed);
     let dx = domain.cell_size();
     let (velocity, dt) = ([0.3f32, -0.2], 0.5f32);
@@ -372,7 +373,7 @@ fn semi_lagrangian_advection_of_linear_fields<B: Backend>() {
     }
 }
 
-fn errors_name_shapes_and_grids<B: Backend>() {
+fn errors_name_shapes_and_grids<B: LatticeKernels>() {
     let dev = device::<B>();
     let a = domain(&[4, 4], &[0.0, 0.0], &[1.0, 1.0], Boundary::Closed);
     let b = domain(&[4, 8], &[0.0, 0.0], &[1.0, 1.0], Boundary::Closed);

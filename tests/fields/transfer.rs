@@ -1,11 +1,12 @@
 //! Sampling, particle ↔ grid transfers and extrapolation.
 
+use phi_core::Tensor;
+use phi_core::fields::LatticeKernels;
 use phi_core::fields::{
     Boundary, CenteredGrid, Domain, Integrator, PointCloud, StaggeredGrid, Transfer, advect_points,
     count_particles, extrapolate_valid, occupied_cells, particles_to_centered,
     particles_to_staggered, sample_centered, sample_staggered, valid_faces,
 };
-use phi_core::{Backend, Tensor};
 
 use super::{domain, for_each_index, max_error, tensor};
 
@@ -44,7 +45,7 @@ fn velocity(axis: usize, x: &[f32]) -> f32 {
             .sum::<f32>()
 }
 
-fn sampling_is_exact_for_linear_fields<B: Backend>() {
+fn sampling_is_exact_for_linear_fields<B: LatticeKernels>() {
     let domain = domain(&[5, 4], &[-1.0, 0.0], &[1.5, 1.0], Boundary::Closed);
     let dev = B::default_device();
     let f = |x: &[f32]| 1.5 * x[0] - 2.0 * x[1] + 0.3;
@@ -95,7 +96,7 @@ fn sampling_is_exact_for_linear_fields<B: Backend>() {
     );
 }
 
-fn particle_grid_particle_reproduces_linear_fields<B: Backend>() {
+fn particle_grid_particle_reproduces_linear_fields<B: LatticeKernels>() {
     let dev = B::default_device();
     for domain in [
         domain(&[8, 6], &[0.0, -1.0], &[2.0, 1.0], Boundary::Closed),
@@ -190,7 +191,7 @@ fn particle_grid_particle_reproduces_linear_fields<B: Backend>() {
     }
 }
 
-fn transfer_conserves_weights<B: Backend>() {
+fn transfer_conserves_weights<B: LatticeKernels>() {
     let dev = B::default_device();
     for domain in [
         domain(&[6, 5], &[0.0, 0.0], &[3.0, 2.5], Boundary::Closed),
@@ -242,7 +243,7 @@ fn transfer_conserves_weights<B: Backend>() {
     }
 }
 
-fn particles_to_centered_density<B: Backend>() {
+fn particles_to_centered_density<B: LatticeKernels>() {
     let domain = domain(&[4, 3], &[0.0, 0.0], &[4.0, 3.0], Boundary::Closed);
     // Two particles in cell (1, 1) at its centre and one at the centre of cell (3, 0).
     let positions = tensor::<B>(&[3, 2], &[1.5, 1.5, 1.5, 1.5, 3.5, 0.5]);
@@ -286,7 +287,7 @@ fn particles_to_centered_density<B: Backend>() {
 /// Host reference of one extrapolation step on a 2-d array (`3×3` box).
 /// The host-side occupancy mask marks exactly the cells that `count_particles` (tensor operations)
 /// counts, also for points on cell sides, on the domain's sides and outside it, in 2D and 3D.
-fn occupied_cells_match_particle_counts<B: Backend>() {
+fn occupied_cells_match_particle_counts<B: LatticeKernels>() {
     let cases = [
         domain(&[7, 5], &[-1.0, 0.5], &[2.5, 3.0], Boundary::Closed),
         domain(
@@ -362,7 +363,7 @@ fn host_extrapolate(values: &[f32], valid: &[f32], shape: [usize; 2]) -> (Vec<f3
     (out, mask)
 }
 
-fn extrapolation_fills_exactly_the_requested_layers<B: Backend>() {
+fn extrapolation_fills_exactly_the_requested_layers<B: LatticeKernels>() {
     let domain = domain(&[10, 9], &[0.0, 0.0], &[10.0, 9.0], Boundary::Closed);
     // A block of liquid in cells 2..5 × 3..6 with a non-uniform velocity.
     let host: Vec<f32> = regular_particles(&domain)
@@ -453,7 +454,7 @@ fn extrapolation_fills_exactly_the_requested_layers<B: Backend>() {
 /// Points in `u_i = a_i x_i`, which multilinear sampling reproduces exactly inside the faces:
 /// one Euler step is `x (1 + z)` and one RK4 step `x (1 + z + z²/2 + z³/6 + z⁴/24)` with
 /// `z = a_i Δt`, the Taylor polynomial of the exact `x e^{z}` to fourth order, in 2D and 3D.
-fn point_advection_integrates_a_linear_field<B: Backend>() {
+fn point_advection_integrates_a_linear_field<B: LatticeKernels>() {
     const RATES: [f32; 3] = [0.8, -1.2, 0.5];
     let dev = B::default_device();
     for d in [2usize, 3] {

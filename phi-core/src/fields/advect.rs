@@ -1,6 +1,6 @@
 //! Advection: semi-Lagrangian advection of grids and explicit advection of points.
 
-use crate::backend::Backend;
+use super::kernels::LatticeKernels;
 use crate::error::{Result, TensorError};
 use crate::tensor::Tensor;
 
@@ -19,7 +19,7 @@ use super::sample::{sample_centered, sample_face_component, sample_staggered, st
 ///
 /// # Errors
 /// [`TensorError::InvalidArgument`] when the field and the velocity live on different grids.
-pub fn advect_semi_lagrangian<B: Backend, G: GridField<B>>(
+pub fn advect_semi_lagrangian<B: LatticeKernels, G: GridField<B>>(
     field: &G,
     velocity: &StaggeredGrid<B>,
     dt: f32,
@@ -27,7 +27,7 @@ pub fn advect_semi_lagrangian<B: Backend, G: GridField<B>>(
     field.advect_semi_lagrangian(velocity, dt)
 }
 
-pub(crate) fn advect_centered<B: Backend>(
+pub(crate) fn advect_centered<B: LatticeKernels>(
     field: &CenteredGrid<B>,
     velocity: &StaggeredGrid<B>,
     dt: f32,
@@ -42,7 +42,7 @@ pub(crate) fn advect_centered<B: Backend>(
     field.with_values(sampled.reshape(&field.values().shape())?)
 }
 
-pub(crate) fn advect_staggered<B: Backend>(
+pub(crate) fn advect_staggered<B: LatticeKernels>(
     field: &StaggeredGrid<B>,
     velocity: &StaggeredGrid<B>,
     dt: f32,
@@ -72,13 +72,13 @@ pub enum Integrator {
 /// `points [N, d]` moved through the (frozen) staggered `velocity` over `dt`, the velocity
 /// sampled as [`sample_staggered`] samples it: Euler `x + Δt u(x)`, or RK4
 /// `x + Δt/6 (k₁ + 2k₂ + 2k₃ + k₄)` with `k₁ = u(x)`, `k₂ = u(x + Δt/2 k₁)`,
-/// `k₃ = u(x + Δt/2 k₂)`, `k₄ = u(x + Δt k₃)`. Through [`Backend::float_advect_points`], one
+/// `k₃ = u(x + Δt/2 k₂)`, `k₄ = u(x + Δt k₃)`. Through [`LatticeKernels::float_advect_points`], one
 /// fused pass over the points on the ndarray backend. Differentiable in the points and the
 /// velocity.
 ///
 /// # Errors
 /// [`TensorError::InvalidArgument`] when `points` is not `[N, d]`.
-pub fn advect_points<B: Backend>(
+pub fn advect_points<B: LatticeKernels>(
     points: &Tensor<B>,
     velocity: &StaggeredGrid<B>,
     dt: f32,

@@ -2,6 +2,7 @@
 //! carry the velocities of the liquid a few cells beyond it (thesis fig. 4.1), so that particles
 //! at the border of the liquid do not interpolate zeros.
 
+use super::kernels::LatticeKernels;
 use crate::backend::{Backend, CompareOp};
 use crate::error::{Result, TensorError};
 use crate::tensor::Tensor;
@@ -34,7 +35,7 @@ fn box_sum<B: Backend>(t: &Tensor<B>, spatial_dims: usize) -> Result<Tensor<B>> 
 /// # Errors
 /// [`TensorError::ShapeMismatch`] when `valid` does not broadcast to `values`;
 /// [`TensorError::InvalidArgument`] when `spatial_dims` exceeds the mask's rank.
-pub fn extrapolate_valid_tensor<B: Backend>(
+pub fn extrapolate_valid_tensor<B: LatticeKernels>(
     values: &Tensor<B>,
     valid: &Tensor<B>,
     spatial_dims: usize,
@@ -72,7 +73,7 @@ pub fn extrapolate_valid_tensor<B: Backend>(
     ))
 }
 
-/// [`Backend::float_extrapolate_valid`] from tensor operations (the default of every backend;
+/// [`LatticeKernels::float_extrapolate_valid`] from tensor operations (the default of every backend;
 /// differentiable in `values`).
 pub(crate) fn composite_extrapolate_valid<B: Backend>(
     values: B::Float,
@@ -97,7 +98,7 @@ pub(crate) fn composite_extrapolate_valid<B: Backend>(
 
 /// A grid whose valid region can be grown ([`extrapolate_valid`]) and that can be advected
 /// ([`super::advect_semi_lagrangian`]).
-pub trait GridField<B: Backend>: Sized {
+pub trait GridField<B: LatticeKernels>: Sized {
     /// See [`extrapolate_valid`].
     ///
     /// # Errors
@@ -111,7 +112,7 @@ pub trait GridField<B: Backend>: Sized {
     fn advect_semi_lagrangian(&self, velocity: &StaggeredGrid<B>, dt: f32) -> Result<Self>;
 }
 
-impl<B: Backend> GridField<B> for CenteredGrid<B> {
+impl<B: LatticeKernels> GridField<B> for CenteredGrid<B> {
     fn extrapolate_valid(&self, valid: &Self, cells: usize) -> Result<(Self, Self)> {
         self.domain()
             .check_same(valid.domain(), "extrapolate_valid")?;
@@ -125,7 +126,7 @@ impl<B: Backend> GridField<B> for CenteredGrid<B> {
     }
 }
 
-impl<B: Backend> GridField<B> for StaggeredGrid<B> {
+impl<B: LatticeKernels> GridField<B> for StaggeredGrid<B> {
     fn extrapolate_valid(&self, valid: &Self, cells: usize) -> Result<(Self, Self)> {
         self.domain()
             .check_same(valid.domain(), "extrapolate_valid")?;
@@ -154,7 +155,7 @@ impl<B: Backend> GridField<B> for StaggeredGrid<B> {
 /// # Errors
 /// [`TensorError::InvalidArgument`] for grids on different domains,
 /// [`TensorError::ShapeMismatch`] for a mask with other channels.
-pub fn extrapolate_valid<B: Backend, G: GridField<B>>(
+pub fn extrapolate_valid<B: LatticeKernels, G: GridField<B>>(
     field: &G,
     valid: &G,
     cells: usize,

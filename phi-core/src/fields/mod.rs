@@ -12,12 +12,15 @@
 //!   [`valid_faces`]), [`extrapolate_valid`] and advection ([`advect_semi_lagrangian`],
 //!   [`advect_points`]).
 //!
-//! Everything is written once over `B: Backend` and works in 2D and 3D (most also in 1D).
+//! Everything is written once over `B: Backend` and works in 2D and 3D (most also in 1D). What
+//! samples, splats, advects points or extrapolates needs `B: LatticeKernels` (the fused kernels of
+//! this layer, an extension of `Backend`: see [`kernels`]).
 
 mod advect;
 mod domain;
 pub(crate) mod extrapolate;
 mod grid;
+pub mod kernels;
 pub mod ops;
 mod point_cloud;
 mod projection;
@@ -27,6 +30,7 @@ pub use advect::{Integrator, advect_points, advect_semi_lagrangian};
 pub use domain::{Boundary, Domain};
 pub use extrapolate::{GridField, extrapolate_valid, extrapolate_valid_tensor};
 pub use grid::{CenteredGrid, StaggeredGrid, cell_centers, face_centers};
+pub use kernels::LatticeKernels;
 pub use ops::{
     apply_wall_boundaries, centered_to_staggered, curl, divergence, gradient, laplace,
     staggered_to_centered,

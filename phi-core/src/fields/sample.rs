@@ -10,6 +10,7 @@
 //! The weights are differentiable in the positions; the indices are not (they are piecewise
 //! constant).
 
+use super::kernels::LatticeKernels;
 use crate::backend::{Backend, IntBinaryOp, ReduceOp};
 use crate::error::{Result, TensorError};
 use crate::tensor::{IntTensor, Tensor};
@@ -34,7 +35,7 @@ pub enum Transfer {
 
 /// Where the samples of a grid lie: `origin + k Δx` for `k` in `0..shape` along each axis (the
 /// cell centres of a domain, or the faces of one staggered component). What
-/// [`Backend::float_lattice_sample`] and [`Backend::float_lattice_splat`] work on.
+/// [`LatticeKernels::float_lattice_sample`] and [`LatticeKernels::float_lattice_splat`] work on.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SampleLattice {
     /// The position of sample `0`.
@@ -171,16 +172,20 @@ impl SampleLattice {
     }
 
     /// `values [samples, c]` (row-major over `shape`) interpolated multilinearly at `points [N, d]`:
-    /// `[N, c]`, through the backend's [`Backend::float_lattice_sample`].
-    fn sample<B: Backend>(&self, values: &Tensor<B>, points: &Tensor<B>) -> Result<Tensor<B>> {
+    /// `[N, c]`, through the backend's [`LatticeKernels::float_lattice_sample`].
+    fn sample<B: LatticeKernels>(
+        &self,
+        values: &Tensor<B>,
+        points: &Tensor<B>,
+    ) -> Result<Tensor<B>> {
         let out =
             B::float_lattice_sample(self, values.primitive().clone(), points.primitive().clone())?;
         Ok(Tensor::from_primitive(out))
     }
 
     /// `(Σ w v [samples, c], Σ w [samples, 1])` of `values [N, c]` at `points [N, d]`, through the
-    /// backend's [`Backend::float_lattice_splat`].
-    fn splat<B: Backend>(
+    /// backend's [`LatticeKernels::float_lattice_splat`].
+    fn splat<B: LatticeKernels>(
         &self,
         points: &Tensor<B>,
         values: &Tensor<B>,
@@ -247,7 +252,7 @@ impl<B: Backend> Stencil<B> {
     }
 }
 
-/// [`Backend::float_lattice_sample`] from tensor operations (the default of every backend;
+/// [`LatticeKernels::float_lattice_sample`] from tensor operations (the default of every backend;
 /// differentiable in the values and the points).
 pub(crate) fn composite_lattice_sample<B: Backend>(
     lattice: &SampleLattice,
@@ -262,9 +267,9 @@ pub(crate) fn composite_lattice_sample<B: Backend>(
         .into_primitive())
 }
 
-/// [`Backend::float_advect_points`] from tensor operations (the default of every backend;
+/// [`LatticeKernels::float_advect_points`] from tensor operations (the default of every backend;
 /// differentiable in the points and the velocity).
-pub(crate) fn composite_advect_points<B: Backend>(
+pub(crate) fn composite_advect_points<B: LatticeKernels>(
     lattices: &[SampleLattice],
     components: &[B::Float],
     points: B::Float,
@@ -293,9 +298,9 @@ pub(crate) fn composite_advect_points<B: Backend>(
     Ok(moved.into_primitive())
 }
 
-/// [`Backend::float_lattice_sample_columns`] one lattice at a time through
-/// [`Backend::float_lattice_sample`], the columns joined (the default).
-pub(crate) fn composite_lattice_sample_columns<B: Backend>(
+/// [`LatticeKernels::float_lattice_sample_columns`] one lattice at a time through
+/// [`LatticeKernels::float_lattice_sample`], the columns joined (the default).
+pub(crate) fn composite_lattice_sample_columns<B: LatticeKernels>(
     lattices: &[SampleLattice],
     components: &[B::Float],
     points: B::Float,
@@ -316,10 +321,10 @@ pub(crate) fn staggered_lattices(domain: &Domain) -> Vec<SampleLattice> {
         .collect()
 }
 
-/// [`Backend::float_lattice_splat_columns`] one column at a time through
-/// [`Backend::float_lattice_splat`] (the default, and the fallback of backends that interleave
+/// [`LatticeKernels::float_lattice_splat_columns`] one column at a time through
+/// [`LatticeKernels::float_lattice_splat`] (the default, and the fallback of backends that interleave
 /// only some cases).
-pub(crate) fn lattice_splat_columns_one_by_one<B: Backend>(
+pub(crate) fn lattice_splat_columns_one_by_one<B: LatticeKernels>(
     lattices: &[SampleLattice],
     points: B::Float,
     values: B::Float,
@@ -336,7 +341,7 @@ pub(crate) fn lattice_splat_columns_one_by_one<B: Backend>(
         .collect()
 }
 
-/// [`Backend::float_lattice_splat`] from tensor operations (the default of every backend).
+/// [`LatticeKernels::float_lattice_splat`] from tensor operations (the default of every backend).
 pub(crate) fn composite_lattice_splat<B: Backend>(
     lattice: &SampleLattice,
     points: B::Float,
@@ -399,7 +404,7 @@ fn component_column<B: Backend>(
 /// # Errors
 /// [`TensorError::InvalidArgument`] when `points` is not `[N, d]` or the component is not of
 /// shape `domain.staggered_shape(axis)`.
-pub fn sample_face_component<B: Backend>(
+pub fn sample_face_component<B: LatticeKernels>(
     component: &Tensor<B>,
     domain: &Domain,
     axis: usize,
@@ -421,7 +426,7 @@ pub fn sample_face_component<B: Backend>(
 ///
 /// # Errors
 /// [`TensorError::InvalidArgument`] when `points` is not `[N, d]`.
-pub fn sample_staggered<B: Backend>(
+pub fn sample_staggered<B: LatticeKernels>(
     velocity: &StaggeredGrid<B>,
     points: &Tensor<B>,
 ) -> Result<Tensor<B>> {
@@ -450,7 +455,7 @@ pub fn sample_staggered<B: Backend>(
 ///
 /// # Errors
 /// [`TensorError::InvalidArgument`] when `points` is not `[N, d]`.
-pub fn sample_centered<B: Backend>(
+pub fn sample_centered<B: LatticeKernels>(
     grid: &CenteredGrid<B>,
     points: &Tensor<B>,
 ) -> Result<Tensor<B>> {
@@ -476,7 +481,7 @@ pub fn sample_centered<B: Backend>(
 /// # Errors
 /// [`TensorError::InvalidArgument`] when the cloud's dimension differs from the domain's or the
 /// values are not `d` velocity components.
-pub fn particles_to_staggered<B: Backend>(
+pub fn particles_to_staggered<B: LatticeKernels>(
     cloud: &PointCloud<B>,
     domain: &Domain,
     transfer: Transfer,
@@ -530,7 +535,7 @@ pub fn particles_to_staggered<B: Backend>(
 /// # Errors
 /// [`TensorError::InvalidArgument`] when the cloud's dimension differs from the domain's or the
 /// cloud has no channels.
-pub fn particles_to_centered<B: Backend>(
+pub fn particles_to_centered<B: LatticeKernels>(
     cloud: &PointCloud<B>,
     domain: &Domain,
     transfer: Transfer,
@@ -693,7 +698,7 @@ pub fn valid_faces<B: Backend>(weights: &StaggeredGrid<B>) -> Result<StaggeredGr
 /// # Errors
 /// [`TensorError::InvalidArgument`] when `points` is not `[N, d]` or the component is not of
 /// shape `domain.staggered_shape(axis)`.
-pub fn sample_face_component_gradient<B: Backend>(
+pub fn sample_face_component_gradient<B: LatticeKernels>(
     component: &Tensor<B>,
     domain: &Domain,
     axis: usize,
@@ -761,7 +766,7 @@ pub fn sample_face_component_gradient<B: Backend>(
 ///
 /// # Errors
 /// [`TensorError::InvalidArgument`] when `points` is not `[N, d]`.
-pub fn sample_staggered_gradient<B: Backend>(
+pub fn sample_staggered_gradient<B: LatticeKernels>(
     velocity: &StaggeredGrid<B>,
     points: &Tensor<B>,
 ) -> Result<Tensor<B>> {
@@ -794,7 +799,7 @@ pub fn sample_staggered_gradient<B: Backend>(
 ///
 /// # Errors
 /// [`TensorError::InvalidArgument`] when the shapes do not fit the domain.
-pub fn particles_to_staggered_affine<B: Backend>(
+pub fn particles_to_staggered_affine<B: LatticeKernels>(
     cloud: &PointCloud<B>,
     affine: &Tensor<B>,
     domain: &Domain,

@@ -147,7 +147,6 @@ fn grids_on_different_domains_do_not_mix() {
 
 #[test]
 fn fused_extrapolation_matches_the_composite_bit_for_bit() {
-    use crate::Backend;
     use rand::{Rng, SeedableRng};
     let mut rng = rand::rngs::StdRng::seed_from_u64(7);
     // (values shape, mask shape, spatial axes): one mask per site, per value, a broadcast the
@@ -210,7 +209,6 @@ fn fused_extrapolation_matches_the_composite_bit_for_bit() {
 
 #[test]
 fn fused_point_advection_matches_the_composite_bit_for_bit() {
-    use crate::Backend;
     use rand::{Rng, SeedableRng};
     let mut rng = rand::rngs::StdRng::seed_from_u64(11);
     for res in [vec![9], vec![7, 5], vec![4, 6, 5]] {
@@ -260,7 +258,6 @@ fn fused_point_advection_matches_the_composite_bit_for_bit() {
 
 #[test]
 fn fused_lattice_transfers_match_the_composite_bit_for_bit() {
-    use crate::Backend;
     use rand::{Rng, SeedableRng};
     let mut rng = rand::rngs::StdRng::seed_from_u64(13);
     let bits = |t: &ndarray::ArcArray<f32, ndarray::IxDyn>| {

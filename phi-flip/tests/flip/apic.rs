@@ -3,11 +3,12 @@
 //! scenes select it, and gradients through APIC steps match finite differences.
 
 use phi_core::backend::burn::Burn;
+use phi_core::fields::LatticeKernels;
 use phi_core::fields::{
     Domain, PointCloud, Transfer, extrapolate_valid, particles_to_staggered,
     particles_to_staggered_affine, sample_staggered, sample_staggered_gradient, valid_faces,
 };
-use phi_core::{AutodiffBackend, Backend, Tensor};
+use phi_core::{AutodiffBackend, Tensor};
 use phi_flip::{FlipParams, FlipSimulation, Particles, Placement, Scene};
 use phi_geom::{Geometry, Obstacle, Rotation};
 
@@ -29,7 +30,7 @@ fn affine_field(points: &[f32], u0: &[f32], a: &[Vec<f32>]) -> Vec<f32> {
 }
 
 /// Particles filling the cells of `region` (8 per cell, jittered) in a closed box of `res`.
-fn filled<B: Backend>(res: &[usize], region: &Geometry) -> Vec<f32> {
+fn filled<B: LatticeKernels>(res: &[usize], region: &Geometry) -> Vec<f32> {
     let d = res.len();
     let sim = FlipSimulation::<B>::new(
         closed(res),
@@ -49,7 +50,7 @@ fn filled<B: Backend>(res: &[usize], region: &Geometry) -> Vec<f32> {
 /// One particle → grid → particle round trip as a step does it (the grid extrapolated one layer
 /// beyond the faces that received weight): APIC when `affine` is given, PIC otherwise. Returns
 /// the particle velocities `[N * d]` and the affine matrices `[N * d * d]` (APIC only).
-fn round_trip<B: Backend>(
+fn round_trip<B: LatticeKernels>(
     domain: &Domain,
     points: &Tensor<B>,
     velocities: &Tensor<B>,
@@ -59,7 +60,7 @@ fn round_trip<B: Backend>(
 }
 
 /// [`round_trip`] with the particle → grid transfer `transfer`.
-fn round_trip_with<B: Backend>(
+fn round_trip_with<B: LatticeKernels>(
     domain: &Domain,
     points: &Tensor<B>,
     velocities: &Tensor<B>,
@@ -351,7 +352,7 @@ fn spinning_disc_keeps_its_angular_momentum_with_apic() {
 
 /// An APIC scene (a block thrown with a spin onto a rotated obstacle over a pool): its first
 /// steps on every backend.
-fn apic_run<B: Backend>(steps: usize) -> Vec<Frame> {
+fn apic_run<B: LatticeKernels>(steps: usize) -> Vec<Frame> {
     let obstacle = boxed(&[9.0, 6.0], &[13.0, 8.0])
         .rotated(Rotation::degrees(30.0))
         .unwrap();
@@ -567,7 +568,7 @@ fn tiny_block() -> [(Vec<usize>, Vec<f32>); 3] {
     [(vec![n, 2], p), (vec![n, 2], v), (vec![n, 2, 2], c)]
 }
 
-fn apic_loss<B: Backend>(sim: &FlipSimulation<B>, inputs: &[(Vec<usize>, Vec<f32>)]) -> f32 {
+fn apic_loss<B: LatticeKernels>(sim: &FlipSimulation<B>, inputs: &[(Vec<usize>, Vec<f32>)]) -> f32 {
     let t: Vec<Tensor<B>> = inputs
         .iter()
         .map(|(s, v)| Tensor::from_vec(v.clone(), s, &B::default_device()).unwrap())
@@ -576,7 +577,7 @@ fn apic_loss<B: Backend>(sim: &FlipSimulation<B>, inputs: &[(Vec<usize>, Vec<f32
 }
 
 /// `Σ w ⊙ x_N + 0.1 Σ w' ⊙ v_N + 0.1 Σ w'' ⊙ C_N`, fixed pseudo-random weights.
-fn apic_loss_of<B: Backend>(sim: &FlipSimulation<B>, t: &[Tensor<B>]) -> Tensor<B> {
+fn apic_loss_of<B: LatticeKernels>(sim: &FlipSimulation<B>, t: &[Tensor<B>]) -> Tensor<B> {
     let mut p = Particles {
         positions: t[0].clone(),
         velocities: t[1].clone(),
@@ -598,7 +599,7 @@ fn apic_loss_of<B: Backend>(sim: &FlipSimulation<B>, t: &[Tensor<B>]) -> Tensor<
         + (&c * &weights(&c.shape(), 2.3)).sum() * 0.1
 }
 
-fn apic_gradients_match_finite_differences<B: AutodiffBackend>() {
+fn apic_gradients_match_finite_differences<B: AutodiffBackend + LatticeKernels>() {
     let mut params = FlipParams::thesis(2, 0.05);
     params.flip_ratio = 0.0;
     params.apic = true;

@@ -16,6 +16,7 @@
 //! held to `2·10⁻² + 2·10⁻²·|g|`, a few times the round-off of the difference quotient after
 //! several steps of amplification.
 
+use phi_core::fields::LatticeKernels;
 use phi_core::fields::{Boundary, Domain};
 use phi_core::{AutodiffBackend, Backend, Tensor};
 use phi_flip::loss::{SinkhornOptions, l2_loss, sinkhorn_divergence};
@@ -126,7 +127,7 @@ fn block_with_inflow() -> Tiny {
 }
 
 impl Tiny {
-    fn simulation<B: Backend>(&self) -> FlipSimulation<B> {
+    fn simulation<B: LatticeKernels>(&self) -> FlipSimulation<B> {
         FlipSimulation::new(
             self.domain.clone(),
             FlipParams::thesis(2, 0.05),
@@ -158,7 +159,11 @@ impl Tiny {
 }
 
 /// `Σ w ⊙ x_N + Σ w' ⊙ v_N` after [`STEPS`] steps from the inputs of [`Tiny::inputs`].
-fn loss<B: Backend>(sim: &FlipSimulation<B>, t: &[Tensor<B>], obstacles: usize) -> Tensor<B> {
+fn loss<B: LatticeKernels>(
+    sim: &FlipSimulation<B>,
+    t: &[Tensor<B>],
+    obstacles: usize,
+) -> Tensor<B> {
     let scene = SceneParameters {
         gravity: t[2].clone(),
         obstacle_offsets: t[3..3 + obstacles].to_vec(),
@@ -191,7 +196,7 @@ fn tensors<B: Backend>(inputs: &[(Vec<usize>, Vec<f32>)]) -> Vec<Tensor<B>> {
 }
 
 /// Backpropagated gradients of the loss with respect to every input.
-fn backprop<B: AutodiffBackend>(tiny: &Tiny) -> Vec<Vec<f32>> {
+fn backprop<B: AutodiffBackend + LatticeKernels>(tiny: &Tiny) -> Vec<Vec<f32>> {
     let sim = tiny.simulation::<B>();
     let leaves: Vec<Tensor<B>> = tensors::<B>(&tiny.inputs())
         .iter()
@@ -207,7 +212,7 @@ fn backprop<B: AutodiffBackend>(tiny: &Tiny) -> Vec<Vec<f32>> {
 }
 
 /// Central differences with step `h` of every input element.
-fn finite_differences<B: Backend>(tiny: &Tiny, h: f32) -> Vec<Vec<f32>> {
+fn finite_differences<B: LatticeKernels>(tiny: &Tiny, h: f32) -> Vec<Vec<f32>> {
     let sim = tiny.simulation::<B>();
     let inputs = tiny.inputs();
     let at = |data: &[(Vec<usize>, Vec<f32>)]| {
@@ -239,7 +244,9 @@ const NAMES: [&str; 5] = [
 
 /// Checks backprop against finite differences (see the module docs for the tolerance); returns
 /// the analytic gradients.
-fn check_against_finite_differences<B: AutodiffBackend>(tiny: &Tiny) -> Vec<Vec<f32>> {
+fn check_against_finite_differences<B: AutodiffBackend + LatticeKernels>(
+    tiny: &Tiny,
+) -> Vec<Vec<f32>> {
     let analytic = backprop::<B>(tiny);
     let fd = finite_differences::<B>(tiny, H);
     let fd_half = finite_differences::<B>(tiny, H / 2.0);
@@ -254,7 +261,7 @@ fn check_against_finite_differences<B: AutodiffBackend>(tiny: &Tiny) -> Vec<Vec<
     analytic
 }
 
-fn gradients_of_a_falling_block_match_finite_differences<B: AutodiffBackend>() {
+fn gradients_of_a_falling_block_match_finite_differences<B: AutodiffBackend + LatticeKernels>() {
     let tiny = falling_block();
     let g = check_against_finite_differences::<B>(&tiny);
     // Free fall: after k steps a particle has fallen `g Δt² k(k+1)/2` (symplectic Euler on the
@@ -275,11 +282,11 @@ fn gradients_of_a_falling_block_match_finite_differences<B: AutodiffBackend>() {
     );
 }
 
-fn gradients_with_an_obstacle_match_finite_differences<B: AutodiffBackend>() {
+fn gradients_with_an_obstacle_match_finite_differences<B: AutodiffBackend + LatticeKernels>() {
     check_against_finite_differences::<B>(&block_over_obstacle());
 }
 
-fn gradients_with_an_inflow_match_finite_differences<B: AutodiffBackend>() {
+fn gradients_with_an_inflow_match_finite_differences<B: AutodiffBackend + LatticeKernels>() {
     check_against_finite_differences::<B>(&block_with_inflow());
 }
 
