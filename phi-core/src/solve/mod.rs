@@ -4,7 +4,8 @@
 //! - [`solve`] / [`solve_transpose`]: native solvers (preconditioned conjugate gradients,
 //!   faer's sparse Cholesky and LU) with [`SolveOptions`] and [`SolveStats`]; failures, including
 //!   non-convergence, are [`SolveError`] values, never a silently wrong result.
-//! - [`poisson_matrix`]: the masked negative Laplacian of FLIP's pressure projection.
+//! - [`PoissonSystem::assemble`]: the masked negative Laplacian of FLIP's pressure projection on
+//!   a [`PoissonGrid`] (plain numbers: resolution, cell sizes, open sides).
 //! - [`crate::backend::Backend::float_linear_solve`] and [`crate::tensor::Tensor::linear_solve`]:
 //!   the same solves on backend tensors. On the autodiff backends the solve is differentiated
 //!   implicitly with respect to the right-hand side: `∂L/∂b = A⁻ᵀ ∂L/∂x`, one adjoint solve, not
@@ -39,7 +40,7 @@ mod sparse;
 mod up_looking;
 
 pub use native::{adjoint_solve_f32, solve, solve_f32, solve_transpose, solve_transpose_f32};
-pub use poisson::{PoissonSystem, Weight, all_faces_open, grid_elimination_order, poisson_matrix};
+pub use poisson::{PoissonGrid, PoissonSystem, Weight, grid_elimination_order};
 pub use sparse::SparseMatrix;
 
 use thiserror::Error;
@@ -167,5 +168,6 @@ pub enum SolveError {
     Tensor(#[from] TensorError),
 }
 
+/// Also the home of helpers that the tests of the layers above share.
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;
