@@ -32,7 +32,22 @@
 //! faster than the sparse Cholesky factorization at 32², 64² and 128², and 1.6× faster than
 //! IC(0) CG at 64³. The factorization stays the method for an exact solve (to rounding) and for
 //! many solves with one matrix, which reuse the factor.
+//!
+//! # Files
+//! Each file imports only from those listed before it:
+//! - `csr`: a borrowed view of a CSR matrix, what the factorizations read;
+//! - `up_looking` (our sparse Cholesky), `mic` (MIC(0) and the product's layout) and `factor`
+//!   (faer's Cholesky and LU, IC(0); it picks `up_looking` for small matrices): factorizations
+//!   of that view;
+//! - `sparse`: [`SparseMatrix`], which owns the arrays and caches those factorizations;
+//! - `native` (the solves: the choice of method, conjugate gradients, the direct solves) and
+//!   `poisson` (the pressure projection's matrix on a [`PoissonGrid`]).
+//!
+//! This file holds the options and errors they share. The module knows nothing of `fields`: the
+//! fields layer uses it, translating its domains into [`PoissonGrid`]s.
 
+mod csr;
+mod factor;
 mod mic;
 mod native;
 mod poisson;

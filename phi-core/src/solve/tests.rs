@@ -408,10 +408,10 @@ fn grid_ordered_cholesky_matches_amd_and_keeps_the_fill_small() {
         let natural = without_ordering(ordered)
             .with_ordering((0..ordered.nrows()).collect())
             .unwrap();
-        let fill = |m: &SparseMatrix| native::cholesky(m).unwrap().factor_entries().unwrap();
+        let fill = |m: &SparseMatrix| m.cholesky().unwrap().factor_entries().unwrap();
         let (restricted, amd, banded) = (
             fill(ordered),
-            native::amd_factor_entries(ordered),
+            factor::amd_factor_entries(ordered.csr()),
             fill(&natural),
         );
         println!(
@@ -565,7 +565,7 @@ fn up_looking_cholesky_matches_faer_on_random_grid_systems() {
         }
         tested += 1;
         let order = a.ordering().expect("2-d systems carry the grid order");
-        let factor = UpLookingCholesky::factorize(a, order).unwrap();
+        let factor = UpLookingCholesky::factorize(a.csr(), order).unwrap();
         let b = random_vec(a.nrows(), seed + 100);
         let x = factor.solve(&b);
         let amd = without_ordering(a);
@@ -584,7 +584,7 @@ fn up_looking_cholesky_matches_faer_on_random_grid_systems() {
         );
         assert!(residual(a, &x, &b) <= 1e-10 * norm(&b), "seed {seed}");
         // The same elimination order gives the same factor structure as faer's analysis.
-        let faer_ordered = native::ordered_cholesky(a, order.to_vec().into()).unwrap();
+        let faer_ordered = factor::ordered_cholesky(a.csr(), order.to_vec().into()).unwrap();
         assert_eq!(
             Some(factor.entries()),
             faer_ordered.factor_entries(),
@@ -604,7 +604,7 @@ fn up_looking_cholesky_solves_random_spd_matrices_in_any_order() {
         let a = random_spd(n, per_row, seed);
         let mut order: Vec<usize> = (0..n).collect();
         order.shuffle(&mut rand::rngs::StdRng::seed_from_u64(seed));
-        let factor = UpLookingCholesky::factorize(&a, &order).unwrap();
+        let factor = UpLookingCholesky::factorize(a.csr(), &order).unwrap();
         for column in 0..3 {
             let b = random_vec(n, seed * 10 + column);
             let x = factor.solve(&b);
@@ -713,7 +713,7 @@ fn split_product_equals_the_csr_product() {
     ] {
         let a = random_spd(n, per_row, seed);
         let width = (0..n).map(|i| far_entries(&a, i)).max().unwrap();
-        let Some(split) = SplitMatrix::new(&a) else {
+        let Some(split) = SplitMatrix::new(a.csr()) else {
             assert!(width > 8, "n {n}: refused a layout of width {width}");
             continue;
         };
@@ -737,7 +737,7 @@ fn split_product_equals_the_csr_product() {
     // A row with more far entries than the layout takes: no split.
     let wide = random_spd(40, 12, 6);
     assert!((0..40).any(|i| far_entries(&wide, i) > 8));
-    assert!(SplitMatrix::new(&wide).is_none());
+    assert!(SplitMatrix::new(wide.csr()).is_none());
 }
 
 /// A matrix whose elimination drops no fill (a tree, children numbered before their parents)
@@ -768,7 +768,7 @@ fn mic0_is_exact_where_no_fill_is_dropped() {
             triplets.push((i, i, d + rng.random_range(0.1..1.0)));
         }
         let a = SparseMatrix::from_triplets(n, n, &triplets).unwrap();
-        let split = SplitMatrix::new(&a).expect("short rows");
+        let split = SplitMatrix::new(a.csr()).expect("short rows");
         let mic = ModifiedIncompleteCholesky::new(&split).expect("an M-matrix");
         let x = random_vec(n, n as u64);
         let ax = a.mul_vec(&x);
