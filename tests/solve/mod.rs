@@ -4,10 +4,9 @@
 
 use std::sync::Arc;
 
-use phi_core::fields::{Boundary, Domain};
+use phi_core::fields::{Boundary, Domain, all_faces_open, poisson_matrix};
 use phi_core::solve::{
-    PoissonSystem, Preconditioner, SolveError, SolveMethod, SolveOptions, SparseMatrix,
-    all_faces_open, poisson_matrix, solve_f32,
+    PoissonSystem, Preconditioner, SolveError, SolveMethod, SolveOptions, SparseMatrix, solve_f32,
 };
 use phi_core::{AutodiffBackend, Backend, Tensor, TensorError};
 

@@ -11,6 +11,8 @@
 //!   [`particles_to_staggered_affine`] and [`sample_staggered_gradient`]), masks ([`occupied_cells`],
 //!   [`valid_faces`]), [`extrapolate_valid`] and advection ([`advect_semi_lagrangian`],
 //!   [`advect_points`]).
+//! - The pressure projection ([`pressure_projection`]) and the Poisson system it solves on a
+//!   domain ([`poisson_matrix`]).
 //!
 //! Everything is written once over `B: Backend` and works in 2D and 3D (most also in 1D). What
 //! samples, splats, advects points or extrapolates needs `B: LatticeKernels` (the fused kernels of
@@ -23,6 +25,7 @@ mod grid;
 pub mod kernels;
 pub mod ops;
 mod point_cloud;
+mod poisson;
 mod projection;
 pub(crate) mod sample;
 
@@ -36,6 +39,7 @@ pub use ops::{
     staggered_to_centered,
 };
 pub use point_cloud::PointCloud;
+pub use poisson::{all_faces_open, poisson_matrix};
 pub use projection::{Projection, ProjectionMasks, pressure_projection};
 pub use sample::{
     SampleLattice, Transfer, count_particles, occupied_cells, occupied_cells_from_host,

@@ -10,11 +10,12 @@
 
 use crate::backend::Backend;
 use crate::error::TensorError;
-use crate::solve::{PoissonSystem, SolveError, SolveOptions, SolveStats, poisson_matrix};
+use crate::solve::{PoissonSystem, SolveError, SolveOptions, SolveStats};
 use crate::tensor::{IntTensor, Tensor};
 
 use super::grid::{CenteredGrid, StaggeredGrid};
 use super::ops::{apply_wall_boundaries, divergence, gradient};
+use super::poisson::{all_faces_open, poisson_matrix};
 
 /// The result of [`pressure_projection`].
 #[derive(Debug, Clone)]
@@ -103,7 +104,7 @@ pub fn pressure_projection<B: Backend>(
             let weights: Vec<_> = open.components().iter().map(|c| c.host_values()).collect();
             poisson_matrix(domain, &liquid_host, &weights)?
         }
-        None => poisson_matrix(domain, &liquid_host, &crate::solve::all_faces_open(domain))?,
+        None => poisson_matrix(domain, &liquid_host, &all_faces_open(domain))?,
     };
     let n = system.unknowns();
     let mut pressure_shape = domain.resolution().to_vec();

@@ -17,7 +17,7 @@
 //! the chain. The matrix itself gets the same split for the conjugate-gradient product
 //! ([`SplitMatrix`]).
 
-use super::sparse::SparseMatrix;
+use super::csr::CsrRef;
 use crate::tensor::all_finite;
 
 /// The share of each dropped fill entry moved to the diagonal (Bridson's choice).
@@ -118,7 +118,7 @@ pub(crate) struct SplitMatrix {
 impl SplitMatrix {
     /// The split of a symmetric `matrix`; `None` when a row has more than [`MAX_FAR`] entries
     /// outside the diagonal and its two neighbours, or for more than `u32::MAX` rows.
-    pub(crate) fn new(matrix: &SparseMatrix) -> Option<Self> {
+    pub(crate) fn new(matrix: CsrRef<'_>) -> Option<Self> {
         let n = matrix.nrows();
         let (row_ptr, cols, values) = (matrix.row_ptr(), matrix.col_indices(), matrix.values());
         let is_far = |i: usize, j: usize| j + 1 < i || j > i + 1;

@@ -4,7 +4,8 @@
 //! - [`solve`] / [`solve_transpose`]: native solvers (preconditioned conjugate gradients,
 //!   faer's sparse Cholesky and LU) with [`SolveOptions`] and [`SolveStats`]; failures, including
 //!   non-convergence, are [`SolveError`] values, never a silently wrong result.
-//! - [`poisson_matrix`]: the masked negative Laplacian of FLIP's pressure projection.
+//! - [`PoissonSystem::assemble`]: the masked negative Laplacian of FLIP's pressure projection on
+//!   a [`PoissonGrid`] (plain numbers: resolution, cell sizes, open sides).
 //! - [`crate::backend::Backend::float_linear_solve`] and [`crate::tensor::Tensor::linear_solve`]:
 //!   the same solves on backend tensors. On the autodiff backends the solve is differentiated
 //!   implicitly with respect to the right-hand side: `∂L/∂b = A⁻ᵀ ∂L/∂x`, one adjoint solve, not
@@ -31,7 +32,22 @@
 //! faster than the sparse Cholesky factorization at 32², 64² and 128², and 1.6× faster than
 //! IC(0) CG at 64³. The factorization stays the method for an exact solve (to rounding) and for
 //! many solves with one matrix, which reuse the factor.
+//!
+//! # Files
+//! Each file imports only from those listed before it:
+//! - `csr`: a borrowed view of a CSR matrix, what the factorizations read;
+//! - `up_looking` (our sparse Cholesky), `mic` (MIC(0) and the product's layout) and `factor`
+//!   (faer's Cholesky and LU, IC(0); it picks `up_looking` for small matrices): factorizations
+//!   of that view;
+//! - `sparse`: [`SparseMatrix`], which owns the arrays and caches those factorizations;
+//! - `native` (the solves: the choice of method, conjugate gradients, the direct solves) and
+//!   `poisson` (the pressure projection's matrix on a [`PoissonGrid`]).
+//!
+//! This file holds the options and errors they share. The module knows nothing of `fields`: the
+//! fields layer uses it, translating its domains into [`PoissonGrid`]s.
 
+mod csr;
+mod factor;
 mod mic;
 mod native;
 mod poisson;
@@ -39,7 +55,7 @@ mod sparse;
 mod up_looking;
 
 pub use native::{adjoint_solve_f32, solve, solve_f32, solve_transpose, solve_transpose_f32};
-pub use poisson::{PoissonSystem, Weight, all_faces_open, grid_elimination_order, poisson_matrix};
+pub use poisson::{PoissonGrid, PoissonSystem, Weight, grid_elimination_order};
 pub use sparse::SparseMatrix;
 
 use thiserror::Error;
@@ -167,5 +183,6 @@ pub enum SolveError {
     Tensor(#[from] TensorError),
 }
 
+/// Also the home of helpers that the tests of the layers above share.
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

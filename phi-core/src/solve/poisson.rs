@@ -1,11 +1,13 @@
-//! The masked Poisson matrix of FLIP's pressure projection (thesis eq. 2.9).
+//! The masked Poisson matrix of FLIP's pressure projection (thesis eq. 2.9), assembled from plain
+//! grid data ([`PoissonGrid`]: a resolution, cell sizes, which sides are open) and cell and face
+//! masks, so that the solvers need no domain type; the fields layer describes its domains this
+//! way.
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
 use super::SolveError;
 use super::sparse::SparseMatrix;
-use crate::fields::{Boundary, Domain};
 
 /// A per-cell or per-face flag or weight: `bool`, `f32` or `f64`.
 ///
@@ -44,7 +46,7 @@ impl Weight for f64 {
 pub struct PoissonSystem {
     /// The negative masked Laplacian over the unknowns (symmetric positive definite).
     pub matrix: Arc<SparseMatrix>,
-    /// For each cell (row-major over the domain's resolution), its unknown, or `None` for a cell
+    /// For each cell (row-major over the grid's resolution), its unknown, or `None` for a cell
     /// that is not liquid.
     pub cell_to_unknown: Vec<Option<usize>>,
     /// For each unknown, its cell.
@@ -95,7 +97,7 @@ impl PoissonSystem {
     /// Subtracts, in each pure-Neumann region, the region's mean from `rhs` (one value per
     /// unknown), making the right-hand side compatible with the singular operator. With a
     /// compatible right-hand side the pinned system gives the exact solution that is zero at the
-    /// pinned cell; see [`poisson_matrix`].
+    /// pinned cell; see [`PoissonSystem::assemble`].
     ///
     /// # Errors
     /// [`SolveError::DimensionMismatch`] when `rhs` does not hold one value per unknown.
@@ -129,12 +131,67 @@ fn check_len(what: &str, expected: usize, got: usize) -> Result<(), SolveError> 
     }
 }
 
-/// Every face open: `face_open` for [`poisson_matrix`] on a domain without obstacles (the
-/// domain's own sides still follow its [`Boundary`] conditions).
-pub fn all_faces_open(domain: &Domain) -> Vec<Vec<bool>> {
-    (0..domain.dim())
-        .map(|axis| vec![true; domain.staggered_shape(axis).iter().product()])
-        .collect()
+/// The grid a Poisson matrix is assembled on, as plain numbers: `d` axes (1 to 3), cells
+/// numbered row-major over `resolution`, and the faces of axis `a` row-major over the
+/// resolution with one more layer along `a` (a MAC grid's staggered component `a`).
+#[derive(Debug, Clone, Copy)]
+pub struct PoissonGrid<'a> {
+    /// Cells per axis.
+    pub resolution: &'a [usize],
+    /// The width of a cell along each axis (positive, in length units): the face coefficients
+    /// are `1/h²`.
+    pub cell_size: &'a [f64],
+    /// Per axis, `[lower side, upper side]`: `true` where the side is open (air beyond it, a
+    /// Dirichlet `p = 0`), `false` where it is a closed wall (no flux).
+    pub open_sides: &'a [[bool; 2]],
+}
+
+impl PoissonGrid<'_> {
+    /// Number of axes.
+    pub fn dim(&self) -> usize {
+        self.resolution.len()
+    }
+
+    /// Number of cells.
+    pub fn cell_count(&self) -> usize {
+        self.resolution.iter().product()
+    }
+
+    /// Number of faces normal to `axis`: the cells' grid with one more layer along `axis`.
+    ///
+    /// # Panics
+    /// When `axis` is not below [`Self::dim`].
+    pub fn face_count(&self, axis: usize) -> usize {
+        assert!(axis < self.dim(), "axis {axis} of a {}-d grid", self.dim());
+        (0..self.dim())
+            .map(|a| self.resolution[a] + usize::from(a == axis))
+            .product()
+    }
+
+    /// Checks that the grid has 1 to 3 axes, one cell size and one pair of sides per axis, no
+    /// empty axis and positive finite cell sizes.
+    fn check(&self) -> Result<(), SolveError> {
+        let d = self.dim();
+        if !(1..=3).contains(&d) {
+            return Err(SolveError::Invalid {
+                reason: format!("a Poisson grid has 1 to 3 axes, not {d}"),
+            });
+        }
+        check_len("cell sizes (one per axis)", d, self.cell_size.len())?;
+        check_len("open sides (one pair per axis)", d, self.open_sides.len())?;
+        for axis in 0..d {
+            let (n, h) = (self.resolution[axis], self.cell_size[axis]);
+            if n == 0 || !(h.is_finite() && h > 0.0) {
+                return Err(SolveError::Invalid {
+                    reason: format!(
+                        "axis {axis} of the Poisson grid has {n} cells of size {h}; it needs at \
+                         least one cell and a positive finite size"
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Row-major strides of `shape`.
@@ -146,140 +203,139 @@ fn strides(shape: &[usize]) -> Vec<usize> {
     strides
 }
 
-/// The negative masked Laplacian `A` of the pressure projection: `A p ≈ −∇²p` on the liquid
-/// cells, with `p = 0` in air.
-///
-/// - `liquid`: one flag per cell, row-major over `domain.resolution()` (a [`Weight`] above
-///   `0.5` is liquid). Only liquid cells are unknowns.
-/// - `face_open[axis]`: one weight per face of staggered component `axis`, row-major over
-///   `domain.staggered_shape(axis)`: `0` for a face that is not accessible (a wall, an
-///   obstacle), `1` for an open face, fractions in between scale the face's coefficient.
-///
-/// For every open face (weight `w`) of a liquid cell, with `h` the cell size along the face's
-/// axis, the cell's diagonal gains `w/h²`; if the neighbour is liquid, the off-diagonal entry
-/// gets `−w/h²` (a flux between two unknowns); if the neighbour is air, nothing else (the
-/// `p = 0` Dirichlet term, ghost value at the air cell's centre). A face on the domain's side
-/// leads to air when that side is [`Boundary::Open`] and is a wall (no flux) when it is
-/// [`Boundary::Closed`], whatever its weight. A face of weight 0 contributes nothing (Neumann).
-///
-/// # Singular regions
-/// A connected liquid region (connected through faces of positive weight) that touches no air
-/// and no open side is a pure Neumann problem: its block of `A` is singular (constants are in the
-/// null space). Each such region gets one *pinned* unknown (its first cell in row-major order),
-/// whose diagonal gains `max_axis 1/h²`, i.e. `A + c e_k e_kᵀ`, which is symmetric positive
-/// definite. If the right-hand side sums to zero over the region (the compatibility condition,
-/// see [`PoissonSystem::remove_singular_means`]), the solution is the exact one with `p = 0` at
-/// the pinned cell; pressure gradients, all the projection uses, do not depend on that constant.
-/// Otherwise the incompatible part ends up at the pinned cell. Pinned unknowns are listed in
-/// [`PoissonSystem::pinned`].
-///
-/// # Errors
-/// [`SolveError::DimensionMismatch`] when `liquid` or a face array has the wrong length or there
-/// is not one face array per axis.
-pub fn poisson_matrix<L: Weight, W: Weight, F: AsRef<[W]>>(
-    domain: &Domain,
-    liquid: &[L],
-    face_open: &[F],
-) -> Result<PoissonSystem, SolveError> {
-    let resolution = domain.resolution();
-    let d = domain.dim();
-    let cells = domain.cell_count();
-    check_len("liquid flags (one per cell)", cells, liquid.len())?;
-    check_len("face arrays (one per axis)", d, face_open.len())?;
-    for (axis, faces) in face_open.iter().enumerate() {
-        let expected: usize = domain.staggered_shape(axis).iter().product();
-        check_len(
-            &format!("face weights of axis {axis}"),
-            expected,
-            faces.as_ref().len(),
-        )?;
-    }
-    let coefficients: Vec<f64> = domain
-        .cell_size()
-        .iter()
-        .map(|&h| 1.0 / (f64::from(h) * f64::from(h)))
-        .collect();
-
-    let mut cell_to_unknown = vec![None; cells];
-    let mut unknown_to_cell = Vec::new();
-    for (cell, flag) in liquid.iter().enumerate() {
-        if flag.weight() > 0.5 {
-            cell_to_unknown[cell] = Some(unknown_to_cell.len());
-            unknown_to_cell.push(cell);
+impl PoissonSystem {
+    /// The negative masked Laplacian `A` of the pressure projection on `grid`: `A p ≈ −∇²p` on
+    /// the liquid cells, with `p = 0` in air.
+    ///
+    /// - `liquid`: one flag per cell, row-major over `grid.resolution` (a [`Weight`] above `0.5`
+    ///   is liquid). Only liquid cells are unknowns.
+    /// - `face_open[axis]`: one weight per face normal to `axis` ([`PoissonGrid::face_count`]),
+    ///   row-major: `0` for a face that is not accessible (a wall, an obstacle), `1` for an open
+    ///   face, fractions in between scale the face's coefficient.
+    ///
+    /// For every open face (weight `w`) of a liquid cell, with `h` the cell size along the
+    /// face's axis, the cell's diagonal gains `w/h²`; if the neighbour is liquid, the
+    /// off-diagonal entry gets `−w/h²` (a flux between two unknowns); if the neighbour is air,
+    /// nothing else (the `p = 0` Dirichlet term, ghost value at the air cell's centre). A face on
+    /// the grid's side leads to air when that side is open and is a wall (no flux) when it is
+    /// closed, whatever its weight. A face of weight 0 contributes nothing (Neumann).
+    ///
+    /// # Singular regions
+    /// A connected liquid region (connected through faces of positive weight) that touches no
+    /// air and no open side is a pure Neumann problem: its block of `A` is singular (constants
+    /// are in the null space). Each such region gets one *pinned* unknown (its first cell in
+    /// row-major order), whose diagonal gains `max_axis 1/h²`, i.e. `A + c e_k e_kᵀ`, which is
+    /// symmetric positive definite. If the right-hand side sums to zero over the region (the
+    /// compatibility condition, see [`PoissonSystem::remove_singular_means`]), the solution is
+    /// the exact one with `p = 0` at the pinned cell; pressure gradients, all the projection
+    /// uses, do not depend on that constant. Otherwise the incompatible part ends up at the
+    /// pinned cell. Pinned unknowns are listed in [`PoissonSystem::pinned`].
+    ///
+    /// # Errors
+    /// [`SolveError::Invalid`] for a grid of other than 1 to 3 axes, an empty axis or a cell
+    /// size that is not positive; [`SolveError::DimensionMismatch`] when the grid's lists,
+    /// `liquid` or a face array have the wrong length or there is not one face array per axis.
+    pub fn assemble<L: Weight, W: Weight, F: AsRef<[W]>>(
+        grid: &PoissonGrid<'_>,
+        liquid: &[L],
+        face_open: &[F],
+    ) -> Result<Self, SolveError> {
+        grid.check()?;
+        let resolution = grid.resolution;
+        let d = grid.dim();
+        let cells = grid.cell_count();
+        check_len("liquid flags (one per cell)", cells, liquid.len())?;
+        check_len("face arrays (one per axis)", d, face_open.len())?;
+        for (axis, faces) in face_open.iter().enumerate() {
+            check_len(
+                &format!("face weights of axis {axis}"),
+                grid.face_count(axis),
+                faces.as_ref().len(),
+            )?;
         }
-    }
-    let n = unknown_to_cell.len();
+        let coefficients: Vec<f64> = grid.cell_size.iter().map(|&h| 1.0 / (h * h)).collect();
 
-    let Rows {
-        row_ptr,
-        col_indices,
-        mut values,
-        diagonal_at,
-        anchored,
-    } = match d {
-        1 => assemble_rows::<1, W, F>(domain, face_open, &coefficients, &cell_to_unknown, n),
-        2 => assemble_rows::<2, W, F>(domain, face_open, &coefficients, &cell_to_unknown, n),
-        3 => assemble_rows::<3, W, F>(domain, face_open, &coefficients, &cell_to_unknown, n),
-        _ => unreachable!("domains have one to three dimensions"),
-    };
-
-    // Regions, numbered in order of their first unknown: a flood fill from each unknown not yet
-    // reached, over the matrix's off-diagonal entries (exactly the open faces between unknowns).
-    let mut region_of = vec![usize::MAX; n];
-    let mut region_anchored = Vec::new();
-    let mut region_first = Vec::new();
-    let mut pending = Vec::new();
-    for first in 0..n {
-        if region_of[first] != usize::MAX {
-            continue;
-        }
-        let region = region_anchored.len();
-        let mut is_anchored = false;
-        region_of[first] = region;
-        pending.push(first);
-        while let Some(u) = pending.pop() {
-            is_anchored |= anchored[u];
-            for &v in &col_indices[row_ptr[u]..row_ptr[u + 1]] {
-                if region_of[v] == usize::MAX {
-                    region_of[v] = region;
-                    pending.push(v);
-                }
+        let mut cell_to_unknown = vec![None; cells];
+        let mut unknown_to_cell = Vec::new();
+        for (cell, flag) in liquid.iter().enumerate() {
+            if flag.weight() > 0.5 {
+                cell_to_unknown[cell] = Some(unknown_to_cell.len());
+                unknown_to_cell.push(cell);
             }
         }
-        region_anchored.push(is_anchored);
-        region_first.push(first);
-    }
-    let pin = coefficients.iter().copied().fold(0.0, f64::max);
-    let mut pinned = Vec::new();
-    for (region, &is_anchored) in region_anchored.iter().enumerate() {
-        if !is_anchored {
-            let u = region_first[region];
-            pinned.push(u);
-            values[diagonal_at[u]] += pin;
+        let n = unknown_to_cell.len();
+
+        let Rows {
+            row_ptr,
+            col_indices,
+            mut values,
+            diagonal_at,
+            anchored,
+        } = match d {
+            1 => assemble_rows::<1, W, F>(grid, face_open, &coefficients, &cell_to_unknown, n),
+            2 => assemble_rows::<2, W, F>(grid, face_open, &coefficients, &cell_to_unknown, n),
+            3 => assemble_rows::<3, W, F>(grid, face_open, &coefficients, &cell_to_unknown, n),
+            _ => unreachable!("checked: one to three axes"),
+        };
+
+        // Regions, numbered in order of their first unknown: a flood fill from each unknown not yet
+        // reached, over the matrix's off-diagonal entries (exactly the open faces between unknowns).
+        let mut region_of = vec![usize::MAX; n];
+        let mut region_anchored = Vec::new();
+        let mut region_first = Vec::new();
+        let mut pending = Vec::new();
+        for first in 0..n {
+            if region_of[first] != usize::MAX {
+                continue;
+            }
+            let region = region_anchored.len();
+            let mut is_anchored = false;
+            region_of[first] = region;
+            pending.push(first);
+            while let Some(u) = pending.pop() {
+                is_anchored |= anchored[u];
+                for &v in &col_indices[row_ptr[u]..row_ptr[u + 1]] {
+                    if region_of[v] == usize::MAX {
+                        region_of[v] = region;
+                        pending.push(v);
+                    }
+                }
+            }
+            region_anchored.push(is_anchored);
+            region_first.push(first);
         }
+        let pin = coefficients.iter().copied().fold(0.0, f64::max);
+        let mut pinned = Vec::new();
+        for (region, &is_anchored) in region_anchored.iter().enumerate() {
+            if !is_anchored {
+                let u = region_first[region];
+                pinned.push(u);
+                values[diagonal_at[u]] += pin;
+            }
+        }
+        let mut matrix = SparseMatrix::from_assembled_csr(n, n, row_ptr, col_indices, values)?
+            .assume_symmetric();
+        if d <= 2 {
+            // Eliminate in the grid's AMD order restricted to the liquid cells: in 2D its fill stays
+            // within 1.25× of an AMD analysis of this matrix (measured 1.14–1.17× on pools), and it
+            // saves that analysis, which costs as much as factorising a matrix used once. 3D keeps
+            // the per-matrix AMD (the restricted order filled 1.7× more at 16³; 3D uses CG by
+            // default anyway).
+            let order: Vec<usize> = grid_elimination_order(resolution)
+                .iter()
+                .filter_map(|&cell| cell_to_unknown[cell as usize])
+                .collect();
+            matrix = matrix.with_ordering(order)?;
+        }
+        Ok(PoissonSystem {
+            matrix: Arc::new(matrix),
+            cell_to_unknown,
+            unknown_to_cell,
+            pinned,
+            region_of,
+            region_is_singular: region_anchored.iter().map(|&a| !a).collect(),
+        })
     }
-    let mut matrix =
-        SparseMatrix::from_assembled_csr(n, n, row_ptr, col_indices, values)?.assume_symmetric();
-    if d <= 2 {
-        // Eliminate in the grid's AMD order restricted to the liquid cells: in 2D its fill stays
-        // within 1.25× of an AMD analysis of this matrix (measured 1.14–1.17× on pools), and it
-        // saves that analysis, which costs as much as factorising a matrix used once. 3D keeps
-        // the per-matrix AMD (the restricted order filled 1.7× more at 16³; 3D uses CG by
-        // default anyway).
-        let order: Vec<usize> = grid_elimination_order(resolution)
-            .iter()
-            .filter_map(|&cell| cell_to_unknown[cell as usize])
-            .collect();
-        matrix = matrix.with_ordering(order)?;
-    }
-    Ok(PoissonSystem {
-        matrix: Arc::new(matrix),
-        cell_to_unknown,
-        unknown_to_cell,
-        pinned,
-        region_of,
-        region_is_singular: region_anchored.iter().map(|&a| !a).collect(),
-    })
 }
 
 /// The CSR rows of the Poisson matrix (before pinning), the position of each row's diagonal
@@ -292,18 +348,18 @@ struct Rows {
     anchored: Vec<bool>,
 }
 
-/// The rows of [`poisson_matrix`] on a `D`-dimensional grid, assembled in column order: unknowns
+/// The rows of [`PoissonSystem::assemble`] on a `D`-dimensional grid, assembled in column order: unknowns
 /// are numbered in row-major cell order, so a row's columns increase as lower neighbours from
 /// axis 0 to D−1 (strides decreasing), the diagonal, then upper neighbours from axis D−1 to 0.
 /// The diagonal sums its face terms axis by axis, lower face before upper.
 fn assemble_rows<const D: usize, W: Weight, F: AsRef<[W]>>(
-    domain: &Domain,
+    grid: &PoissonGrid<'_>,
     face_open: &[F],
     coefficients: &[f64],
     cell_to_unknown: &[Option<usize>],
     n: usize,
 ) -> Rows {
-    let resolution: [usize; D] = std::array::from_fn(|axis| domain.resolution()[axis]);
+    let resolution: [usize; D] = std::array::from_fn(|axis| grid.resolution[axis]);
     let row_major = |shape: [usize; D]| -> [usize; D] {
         let strides = strides(&shape);
         std::array::from_fn(|axis| strides[axis])
@@ -317,8 +373,7 @@ fn assemble_rows<const D: usize, W: Weight, F: AsRef<[W]>>(
         row_major(shape)
     });
     let faces: [&[W]; D] = std::array::from_fn(|axis| face_open[axis].as_ref());
-    let open_side: [[bool; 2]; D] =
-        std::array::from_fn(|axis| domain.boundaries()[axis].map(|side| side == Boundary::Open));
+    let open_side: [[bool; 2]; D] = std::array::from_fn(|axis| grid.open_sides[axis]);
     let coefficients: [f64; D] = std::array::from_fn(|axis| coefficients[axis]);
 
     let mut rows = Rows {

@@ -1,12 +1,17 @@
 //! [`SparseMatrix`]: compressed sparse rows in `f64`, with cached factorizations.
+//!
+//! The factorizations and preconditioners ([`super::factor`], [`super::mic`]) read the matrix
+//! through a borrowed view ([`CsrRef`]); this file owns the arrays and keeps what they compute,
+//! so the imports point one way: the view, then the factorizations, then the matrix.
 
 use std::fmt;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};
 
 use super::SolveError;
+use super::csr::CsrRef;
+use super::factor::{CholeskyFactor, IncompleteCholesky, LuFactor};
 use super::mic::{ModifiedIncompleteCholesky, SplitMatrix};
-use super::native::{CholeskyFactor, IncompleteCholesky, LuFactor};
 
 /// A sparse matrix in compressed sparse row (CSR) form with `f64` values.
 ///
@@ -23,15 +28,15 @@ pub struct SparseMatrix {
     symmetric: OnceLock<bool>,
     stencil_m_matrix: OnceLock<bool>,
     transpose: OnceLock<Arc<SparseMatrix>>,
-    pub(super) cholesky: OnceLock<Result<Arc<CholeskyFactor>, SolveError>>,
-    pub(super) lu: OnceLock<Result<Arc<LuFactor>, SolveError>>,
-    pub(super) ic0: OnceLock<Option<Arc<IncompleteCholesky>>>,
-    pub(super) mic0: OnceLock<Option<Arc<ModifiedIncompleteCholesky>>>,
+    cholesky: OnceLock<Result<Arc<CholeskyFactor>, SolveError>>,
+    lu: OnceLock<Result<Arc<LuFactor>, SolveError>>,
+    ic0: OnceLock<Option<Arc<IncompleteCholesky>>>,
+    mic0: OnceLock<Option<Arc<ModifiedIncompleteCholesky>>>,
     /// The layout of the conjugate-gradient product, where the rows fit it.
-    pub(super) split: OnceLock<Option<Arc<SplitMatrix>>>,
+    split: OnceLock<Option<Arc<SplitMatrix>>>,
     /// A fill-reducing elimination order for the Cholesky factorization (see
     /// [`SparseMatrix::with_ordering`]); `None`: faer computes an AMD ordering.
-    pub(super) ordering: Option<Arc<[usize]>>,
+    ordering: Option<Arc<[usize]>>,
     solves: AtomicUsize,
     factorizations: AtomicUsize,
 }
@@ -268,12 +273,21 @@ impl SparseMatrix {
     }
 
     /// The stored entries of row `i` as `(column, value)` pairs.
+    #[inline]
     pub fn row(&self, i: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
-        let range = self.row_ptr[i]..self.row_ptr[i + 1];
-        self.col_indices[range.clone()]
-            .iter()
-            .copied()
-            .zip(self.values[range].iter().copied())
+        self.csr().row(i)
+    }
+
+    /// The matrix as a borrowed view, what the factorizations read.
+    #[inline]
+    pub(crate) fn csr(&self) -> CsrRef<'_> {
+        CsrRef::new(
+            self.nrows,
+            self.ncols,
+            &self.row_ptr,
+            &self.col_indices,
+            &self.values,
+        )
     }
 
     /// Entry `(i, j)`, zero where nothing is stored.
@@ -441,8 +455,60 @@ impl SparseMatrix {
         self.solves.fetch_add(n, Ordering::Relaxed);
     }
 
-    pub(super) fn count_factorization(&self) {
+    fn count_factorization(&self) {
         self.factorizations.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// The sparse Cholesky factorization ([`CholeskyFactor::factorize`], in the elimination
+    /// order where the matrix has one), computed once and cached, failure included.
+    pub(super) fn cholesky(&self) -> Result<Arc<CholeskyFactor>, SolveError> {
+        self.cholesky
+            .get_or_init(|| {
+                self.count_factorization();
+                CholeskyFactor::factorize(self.csr(), self.ordering.as_ref()).map(Arc::new)
+            })
+            .clone()
+    }
+
+    /// The sparse LU factorization, computed once and cached, failure included.
+    pub(super) fn lu(&self) -> Result<Arc<LuFactor>, SolveError> {
+        self.lu
+            .get_or_init(|| {
+                self.count_factorization();
+                LuFactor::factorize(self.csr()).map(Arc::new)
+            })
+            .clone()
+    }
+
+    /// IC(0) of the symmetric matrix, computed once and cached; `None` where a pivot breaks
+    /// down.
+    pub(super) fn incomplete_cholesky(&self) -> Option<Arc<IncompleteCholesky>> {
+        self.ic0
+            .get_or_init(|| {
+                self.count_factorization();
+                IncompleteCholesky::new(self.csr()).map(Arc::new)
+            })
+            .clone()
+    }
+
+    /// MIC(0) of the symmetric matrix on its product layout ([`Self::split`]), computed once and
+    /// cached; `None` where the rows do not fit the layout or a pivot breaks down.
+    pub(super) fn modified_incomplete_cholesky(&self) -> Option<Arc<ModifiedIncompleteCholesky>> {
+        self.mic0
+            .get_or_init(|| {
+                self.count_factorization();
+                self.split()
+                    .and_then(|split| ModifiedIncompleteCholesky::new(&split).map(Arc::new))
+            })
+            .clone()
+    }
+
+    /// The product layout of the symmetric matrix ([`SplitMatrix`]), built once and cached;
+    /// `None` where its rows do not fit.
+    pub(super) fn split(&self) -> Option<Arc<SplitMatrix>> {
+        self.split
+            .get_or_init(|| SplitMatrix::new(self.csr()).map(Arc::new))
+            .clone()
     }
 }
 

@@ -1,11 +1,10 @@
-//! Tests of the host-side solvers and the Poisson assembly.
+//! Tests of the host-side solvers and the Poisson assembly on plain grids.
 
 use rand::{Rng, SeedableRng};
 
 use super::*;
-use crate::fields::{Boundary, Domain};
 
-const ALL_METHODS: [SolveMethod; 7] = [
+pub(crate) const ALL_METHODS: [SolveMethod; 7] = [
     SolveMethod::Auto,
     SolveMethod::Cholesky,
     SolveMethod::Lu,
@@ -40,7 +39,7 @@ fn random_spd(n: usize, per_row: usize, seed: u64) -> SparseMatrix {
     SparseMatrix::from_triplets(n, n, &triplets).unwrap()
 }
 
-fn random_vec(n: usize, seed: u64) -> Vec<f64> {
+pub(crate) fn random_vec(n: usize, seed: u64) -> Vec<f64> {
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     (0..n).map(|_| rng.random_range(-1.0..1.0)).collect()
 }
@@ -54,17 +53,31 @@ fn residual(a: &SparseMatrix, x: &[f64], b: &[f64]) -> f64 {
     norm(&ax.iter().zip(b).map(|(p, q)| p - q).collect::<Vec<_>>())
 }
 
-/// The 2-d or 3-d Poisson matrix on a closed box with an open top (the upper side of the last
-/// axis), every cell liquid.
+/// Every face of `grid` open.
+fn all_faces_open(grid: &PoissonGrid<'_>) -> Vec<Vec<bool>> {
+    (0..grid.dim())
+        .map(|axis| vec![true; grid.face_count(axis)])
+        .collect()
+}
+
+/// The sides of a closed tank with an open top (the upper side of the last axis).
+fn open_top(d: usize) -> Vec<[bool; 2]> {
+    let mut open_sides = vec![[false; 2]; d];
+    open_sides[d - 1][1] = true;
+    open_sides
+}
+
+/// The 2-d or 3-d Poisson matrix on a closed box of unit cells with an open top, every cell
+/// liquid.
 fn box_poisson(resolution: &[usize]) -> PoissonSystem {
     let d = resolution.len();
-    let mut boundaries = vec![[Boundary::Closed; 2]; d];
-    boundaries[d - 1][1] = Boundary::Open;
-    let lower = vec![0.0; d];
-    let upper: Vec<f32> = resolution.iter().map(|&n| n as f32).collect();
-    let domain = Domain::new(resolution, &lower, &upper, &boundaries).unwrap();
-    let liquid = vec![true; domain.cell_count()];
-    poisson_matrix(&domain, &liquid, &all_faces_open(&domain)).unwrap()
+    let grid = PoissonGrid {
+        resolution,
+        cell_size: &vec![1.0; d],
+        open_sides: &open_top(d),
+    };
+    let liquid = vec![true; grid.cell_count()];
+    PoissonSystem::assemble(&grid, &liquid, &all_faces_open(&grid)).unwrap()
 }
 
 #[test]
@@ -210,238 +223,94 @@ fn nan_and_bad_sizes_are_errors() {
     ));
 }
 
+/// Face counts follow the MAC layout, and a grid that cannot carry a Poisson matrix is an error
+/// saying what is wrong, not a panic.
 #[test]
-fn masked_matrix_properties() {
-    // 6×5 domain, open top (upper side of axis 1), closed elsewhere; an air pocket and an
-    // obstacle face.
-    let domain = Domain::new(
-        &[6, 5],
-        &[0.0, 0.0],
-        &[3.0, 5.0],
-        &[[Boundary::Closed; 2], [Boundary::Closed, Boundary::Open]],
-    )
-    .unwrap();
-    let mut liquid = vec![1.0f32; 30];
-    liquid[2 * 5 + 3] = 0.0; // air at (2, 3)
-    let mut faces = all_faces_open(&domain);
-    faces[0][4 * 5 + 1] = false; // the face between (3, 1) and (4, 1)
-    let system = poisson_matrix(&domain, &liquid, &faces).unwrap();
-    let a = &system.matrix;
-    assert_eq!(system.unknowns(), 29);
-    assert_eq!(system.cell_to_unknown[2 * 5 + 3], None);
-    assert!(system.pinned.is_empty());
-    assert!(a.is_symmetric());
-    let (hx, hy) = (0.5f64, 1.0f64);
-    let (cx, cy) = (1.0 / (hx * hx), 1.0 / (hy * hy));
-    for u in 0..a.nrows() {
-        assert!(a.get(u, u) > 0.0, "diagonal {u}");
-        for (v, value) in a.row(u) {
-            if v != u {
-                assert!(value < 0.0);
-            }
+fn poisson_grids_are_checked() {
+    let open_sides = [[false; 2], [false, true]];
+    let grid = PoissonGrid {
+        resolution: &[3, 2],
+        cell_size: &[1.0, 0.5],
+        open_sides: &open_sides,
+    };
+    assert_eq!((grid.dim(), grid.cell_count()), (2, 6));
+    assert_eq!((grid.face_count(0), grid.face_count(1)), (8, 9));
+    let liquid = [true; 6];
+    let faces = all_faces_open(&grid);
+    let system = PoissonSystem::assemble(&grid, &liquid, &faces).unwrap();
+    assert_eq!(system.unknowns(), 6);
+    assert!(system.pinned.is_empty(), "the open top anchors the region");
+
+    let assemble = |grid: PoissonGrid<'_>| PoissonSystem::assemble(&grid, &liquid, &faces);
+    let invalid = |result: Result<PoissonSystem, SolveError>, needle: &str| match result {
+        Err(SolveError::Invalid { reason }) => {
+            assert!(reason.contains(needle), "{reason:?} should name {needle:?}")
         }
+        other => panic!("expected Invalid naming {needle:?}, got {other:?}"),
+    };
+    invalid(
+        assemble(PoissonGrid {
+            resolution: &[1, 1, 2, 3],
+            cell_size: &[1.0; 4],
+            open_sides: &[[false; 2]; 4],
+        }),
+        "not 4",
+    );
+    invalid(
+        assemble(PoissonGrid {
+            resolution: &[],
+            cell_size: &[],
+            open_sides: &[],
+        }),
+        "not 0",
+    );
+    invalid(
+        assemble(PoissonGrid {
+            resolution: &[6, 0],
+            ..grid
+        }),
+        "axis 1",
+    );
+    for h in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        invalid(
+            assemble(PoissonGrid {
+                cell_size: &[1.0, h],
+                ..grid
+            }),
+            "axis 1",
+        );
     }
-    let unknown = |i: usize, j: usize| system.cell_to_unknown[i * 5 + j].unwrap();
-    // An interior cell whose neighbours are all liquid: row sum 0, diagonal 2/hx² + 2/hy².
-    let u = unknown(1, 2);
-    assert_eq!(a.row(u).map(|(_, v)| v).sum::<f64>(), 0.0);
-    assert_eq!(a.get(u, u), 2.0 * cx + 2.0 * cy);
-    assert_eq!(a.get(u, unknown(0, 2)), -cx);
-    assert_eq!(a.get(u, unknown(1, 3)), -cy);
-    // Next to the air cell: the Dirichlet term adds to the diagonal only.
-    let u = unknown(2, 2);
-    assert_eq!(a.get(u, u), 2.0 * cx + 2.0 * cy);
-    assert_eq!(a.row(u).map(|(_, v)| v).sum::<f64>(), cy);
-    // At a closed wall: no flux through it.
-    let u = unknown(0, 2);
-    assert_eq!(a.get(u, u), cx + 2.0 * cy);
-    assert_eq!(a.row(u).map(|(_, v)| v).sum::<f64>(), 0.0);
-    // At the open top: the outside counts as air.
-    let u = unknown(0, 4);
-    assert_eq!(a.get(u, u), cx + 2.0 * cy);
-    assert_eq!(a.row(u).map(|(_, v)| v).sum::<f64>(), cy);
-    // The closed obstacle face: no coupling, no flux.
-    assert_eq!(a.get(unknown(3, 1), unknown(4, 1)), 0.0);
-    assert_eq!(a.get(unknown(3, 1), unknown(3, 1)), cx + 2.0 * cy);
-    // Positive definite: Cholesky succeeds.
-    let b = random_vec(29, 1);
-    assert!(solve(a, &b, 1, &SolveOptions::with_method(SolveMethod::Cholesky)).is_ok());
-    // Bad sizes.
     assert!(matches!(
-        poisson_matrix(&domain, &liquid[..29], &faces),
-        Err(SolveError::DimensionMismatch { .. })
+        assemble(PoissonGrid {
+            cell_size: &[1.0],
+            ..grid
+        }),
+        Err(SolveError::DimensionMismatch {
+            expected: 2,
+            got: 1,
+            ..
+        })
     ));
     assert!(matches!(
-        poisson_matrix(&domain, &liquid, &faces[..1]),
-        Err(SolveError::DimensionMismatch { .. })
+        assemble(PoissonGrid {
+            open_sides: &open_sides[..1],
+            ..grid
+        }),
+        Err(SolveError::DimensionMismatch {
+            expected: 2,
+            got: 1,
+            ..
+        })
     ));
-}
-
-#[test]
-fn pure_neumann_regions_are_pinned() {
-    // A closed box full of liquid, plus a separate pocket sealed by obstacle faces and a second
-    // region next to air: the first two are singular and get one pin each.
-    let domain = Domain::closed_unit_cells(&[6, 4]).unwrap();
-    let mut liquid = vec![true; 24];
-    liquid[5 * 4 + 3] = false; // air at (5, 3)
-    let mut faces = all_faces_open(&domain);
-    // Wall off column x=0 (cells (0, *)) from the rest: faces between x=0 and x=1.
-    for j in 0..4 {
-        faces[0][4 + j] = false;
-    }
-    let system = poisson_matrix(&domain, &liquid, &faces).unwrap();
-    assert_eq!(system.pinned, vec![0]);
-    assert_eq!(system.region_is_singular.len(), 2);
-    let a = &system.matrix;
-    assert!(a.is_symmetric());
-    // Compatible right-hand side: the exact solution with p = 0 at the pinned cell.
-    let mut b = random_vec(system.unknowns(), 4);
-    system.remove_singular_means(&mut b).unwrap();
-    // Exactly, by the direct solve (an iterative one holds the pin only to its tolerance).
-    let direct = SolveOptions::with_method(SolveMethod::Cholesky);
-    let (x, _) = solve(a, &b, 1, &direct).unwrap();
-    assert!(x[0].abs() < 1e-12);
-    // Without the pin the same x solves the singular operator: A x = b in region 0.
-    let ax = a.mul_vec(&x);
-    let pin = a.get(0, 0) - 1.0; // the corner cell (0, 0) has one neighbour, (0, 1)
-    assert!((pin - 1.0).abs() < 1e-12);
-    for u in 0..4 {
-        let unpinned = ax[u] - if u == 0 { pin * x[0] } else { 0.0 };
-        assert!((unpinned - b[u]).abs() < 1e-8, "row {u}");
-    }
-    // Every method handles the pinned system.
-    for method in ALL_METHODS {
-        assert!(solve(a, &b, 1, &SolveOptions::with_method(method)).is_ok());
-    }
-    // An isolated liquid cell sealed on every side is pinned too.
-    let mut faces = all_faces_open(&domain);
-    faces[0][4 * 3 + 1] = false;
-    faces[0][4 * 4 + 1] = false;
-    faces[1][3 * 5 + 1] = false;
-    faces[1][3 * 5 + 2] = false;
-    let system = poisson_matrix(&domain, &[true; 24], &faces).unwrap();
-    let isolated = system.cell_to_unknown[3 * 4 + 1].unwrap();
-    assert!(system.pinned.contains(&isolated));
-    assert_eq!(system.pinned.len(), 2);
-}
-
-/// Max-norm errors of three manufactured solutions on refined grids; each converges at second
-/// order.
-#[test]
-fn manufactured_solutions_converge_at_second_order() {
-    use std::f64::consts::PI;
-    let sizes = [8usize, 16, 32, 64];
-    type Case = (&'static str, fn(usize) -> f64);
-    let cases: [Case; 3] = [
-        // Open sides: ghost air centres exactly on x, y ∈ {0, 1}; p = sin πx sin πy.
-        ("open sides (Dirichlet)", |n| {
-            let h = 1.0 / n as f64;
-            let m = n - 1;
-            let lo = (h / 2.0) as f32;
-            let hi = (1.0 - h / 2.0) as f32;
-            let domain =
-                Domain::new(&[m, m], &[lo, lo], &[hi, hi], &[[Boundary::Open; 2]; 2]).unwrap();
-            let system =
-                poisson_matrix(&domain, &vec![true; m * m], &all_faces_open(&domain)).unwrap();
-            let exact = |x: f64, y: f64| (PI * x).sin() * (PI * y).sin();
-            max_error(&domain, &system, exact, |x, y| 2.0 * PI * PI * exact(x, y))
-        }),
-        // Air columns at x = 0 and x = 1 inside the domain, closed walls at y = 0, 1:
-        // p = sin πx cos πy.
-        ("air mask + closed walls", |n| {
-            let h = 1.0 / n as f64;
-            let domain = Domain::new(
-                &[n + 1, n],
-                &[(-h / 2.0) as f32, 0.0],
-                &[(1.0 + h / 2.0) as f32, 1.0],
-                &[[Boundary::Closed; 2]; 2],
-            )
-            .unwrap();
-            let liquid: Vec<bool> = (0..(n + 1) * n).map(|c| c / n != 0 && c / n != n).collect();
-            let system = poisson_matrix(&domain, &liquid, &all_faces_open(&domain)).unwrap();
-            assert!(system.pinned.is_empty());
-            let exact = |x: f64, y: f64| (PI * x).sin() * (PI * y).cos();
-            max_error(&domain, &system, exact, |x, y| 2.0 * PI * PI * exact(x, y))
-        }),
-        // Pure Neumann, pinned: p = cos πx cos πy, compared up to the constant.
-        ("pure Neumann (pinned)", |n| {
-            let domain = Domain::new(
-                &[n, n],
-                &[0.0, 0.0],
-                &[1.0, 1.0],
-                &[[Boundary::Closed; 2]; 2],
-            )
-            .unwrap();
-            let liquid = vec![true; n * n];
-            let system = poisson_matrix(&domain, &liquid, &all_faces_open(&domain)).unwrap();
-            assert_eq!(system.pinned.len(), 1);
-            let exact = |x: f64, y: f64| (PI * x).cos() * (PI * y).cos();
-            max_error(&domain, &system, exact, |x, y| 2.0 * PI * PI * exact(x, y))
-        }),
-    ];
-    for (name, run) in cases {
-        let errors: Vec<f64> = sizes.iter().map(|&n| run(n)).collect();
-        let orders: Vec<f64> = errors.windows(2).map(|e| (e[0] / e[1]).log2()).collect();
-        let shown: Vec<String> = errors.iter().map(|e| format!("{e:.3e}")).collect();
-        println!("{name}: max errors {shown:?} at n = {sizes:?}, observed orders {orders:.3?}");
-        for &order in &orders {
-            assert!(order >= 1.8, "{name}: order {order} (errors {errors:?})");
-        }
-    }
-}
-
-/// Solves the manufactured problem (`−∇²p = f`) and returns the max-norm error over the liquid
-/// cells, both sides with their means removed in pinned (pure Neumann) systems.
-fn max_error(
-    domain: &Domain,
-    system: &PoissonSystem,
-    exact: impl Fn(f64, f64) -> f64,
-    source: impl Fn(f64, f64) -> f64,
-) -> f64 {
-    let res = domain.resolution();
-    let h = domain.cell_size();
-    let centre = |cell: usize| {
-        let (i, j) = (cell / res[1], cell % res[1]);
-        (
-            f64::from(domain.lower()[0]) + (i as f64 + 0.5) * f64::from(h[0]),
-            f64::from(domain.lower()[1]) + (j as f64 + 0.5) * f64::from(h[1]),
-        )
-    };
-    let mut b: Vec<f64> = system
-        .unknown_to_cell
-        .iter()
-        .map(|&c| {
-            let (x, y) = centre(c);
-            source(x, y)
+    let short_faces = [vec![true; 8], vec![true; 8]];
+    assert!(matches!(
+        PoissonSystem::assemble(&grid, &liquid, &short_faces),
+        Err(SolveError::DimensionMismatch {
+            expected: 9,
+            got: 8,
+            ..
         })
-        .collect();
-    let mut want: Vec<f64> = system
-        .unknown_to_cell
-        .iter()
-        .map(|&c| {
-            let (x, y) = centre(c);
-            exact(x, y)
-        })
-        .collect();
-    let options = SolveOptions {
-        relative_tolerance: 1e-12,
-        ..SolveOptions::default()
-    };
-    let singular = !system.pinned.is_empty();
-    if singular {
-        system.remove_singular_means(&mut b).unwrap();
-    }
-    let (mut x, _) = solve(&system.matrix, &b, 1, &options).unwrap();
-    if singular {
-        for v in [&mut x, &mut want] {
-            let mean = v.iter().sum::<f64>() / v.len() as f64;
-            v.iter_mut().for_each(|e| *e -= mean);
-        }
-    }
-    x.iter()
-        .zip(&want)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0, f64::max)
+    ));
 }
 
 #[test]
@@ -464,18 +333,18 @@ fn grid_elimination_orders_are_permutations() {
     }
 }
 
-/// A closed tank (open top) holding a pool of a third of its height and a ball of liquid above,
-/// like a FLIP step's liquid cells.
+/// A closed tank of unit cells (open top) holding a pool of a third of its height and a ball of
+/// liquid above, like a FLIP step's liquid cells.
 fn pool_and_ball(resolution: &[usize]) -> PoissonSystem {
     let d = resolution.len();
-    let mut boundaries = vec![[Boundary::Closed; 2]; d];
-    boundaries[d - 1][1] = Boundary::Open;
-    let lower = vec![0.0; d];
-    let upper: Vec<f32> = resolution.iter().map(|&n| n as f32).collect();
-    let domain = Domain::new(resolution, &lower, &upper, &boundaries).unwrap();
-    let mut liquid = Vec::with_capacity(domain.cell_count());
+    let grid = PoissonGrid {
+        resolution,
+        cell_size: &vec![1.0; d],
+        open_sides: &open_top(d),
+    };
+    let mut liquid = Vec::with_capacity(grid.cell_count());
     let mut index = vec![0usize; d];
-    for cell in 0..domain.cell_count() {
+    for cell in 0..grid.cell_count() {
         let mut rest = cell;
         for axis in (0..d).rev() {
             index[axis] = rest % resolution[axis];
@@ -490,7 +359,7 @@ fn pool_and_ball(resolution: &[usize]) -> PoissonSystem {
             .sum();
         liquid.push(height < 0.33 || ball < 0.04);
     }
-    poisson_matrix(&domain, &liquid, &all_faces_open(&domain)).unwrap()
+    PoissonSystem::assemble(&grid, &liquid, &all_faces_open(&grid)).unwrap()
 }
 
 /// The same matrix without an elimination order (faer's AMD then orders it).
@@ -539,10 +408,10 @@ fn grid_ordered_cholesky_matches_amd_and_keeps_the_fill_small() {
         let natural = without_ordering(ordered)
             .with_ordering((0..ordered.nrows()).collect())
             .unwrap();
-        let fill = |m: &SparseMatrix| native::cholesky(m).unwrap().factor_entries().unwrap();
+        let fill = |m: &SparseMatrix| m.cholesky().unwrap().factor_entries().unwrap();
         let (restricted, amd, banded) = (
             fill(ordered),
-            native::amd_factor_entries(ordered),
+            factor::amd_factor_entries(ordered.csr()),
             fill(&natural),
         );
         println!(
@@ -634,24 +503,20 @@ fn ordered_factorizations_of_one_pattern_are_each_their_own() {
     }
 }
 
-/// A random 2-d pressure system: random liquid blobs (often several disjoint regions, some
-/// sealed), random obstacle faces (blocked or partly open), random open or closed sides.
+/// A random 2-d pressure system on cells of size 0.5: random liquid blobs (often several disjoint
+/// regions, some sealed), random obstacle faces (blocked or partly open), random open or closed
+/// sides.
 fn random_grid_poisson(seed: u64) -> PoissonSystem {
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     let resolution = [rng.random_range(3..40usize), rng.random_range(3..40usize)];
-    let boundaries: Vec<[Boundary; 2]> = (0..2)
-        .map(|_| {
-            [0, 1].map(|_| {
-                if rng.random_bool(0.3) {
-                    Boundary::Open
-                } else {
-                    Boundary::Closed
-                }
-            })
-        })
+    let open_sides: Vec<[bool; 2]> = (0..2)
+        .map(|_| [0, 1].map(|_| rng.random_bool(0.3)))
         .collect();
-    let upper: Vec<f32> = resolution.iter().map(|&n| n as f32 * 0.5).collect();
-    let domain = Domain::new(&resolution, &[0.0, 0.0], &upper, &boundaries).unwrap();
+    let grid = PoissonGrid {
+        resolution: &resolution,
+        cell_size: &[0.5, 0.5],
+        open_sides: &open_sides,
+    };
     // Blobs: discs of random centres and radii; a few cells of air scattered inside.
     let blobs: Vec<(f64, f64, f64)> = (0..rng.random_range(1..5))
         .map(|_| {
@@ -662,7 +527,7 @@ fn random_grid_poisson(seed: u64) -> PoissonSystem {
             )
         })
         .collect();
-    let liquid: Vec<bool> = (0..domain.cell_count())
+    let liquid: Vec<bool> = (0..grid.cell_count())
         .map(|cell| {
             let (i, j) = ((cell / resolution[1]) as f64, (cell % resolution[1]) as f64);
             let inside = blobs
@@ -673,7 +538,7 @@ fn random_grid_poisson(seed: u64) -> PoissonSystem {
         .collect();
     let faces: Vec<Vec<f64>> = (0..2)
         .map(|axis| {
-            (0..domain.staggered_shape(axis).iter().product::<usize>())
+            (0..grid.face_count(axis))
                 .map(|_| match rng.random_range(0..10) {
                     0 => 0.0,
                     1 => rng.random_range(0.05..1.0),
@@ -682,7 +547,7 @@ fn random_grid_poisson(seed: u64) -> PoissonSystem {
                 .collect()
         })
         .collect();
-    poisson_matrix(&domain, &liquid, &faces).unwrap()
+    PoissonSystem::assemble(&grid, &liquid, &faces).unwrap()
 }
 
 /// The up-looking factorization against faer's (AMD ordering, and the same grid order): the
@@ -700,7 +565,7 @@ fn up_looking_cholesky_matches_faer_on_random_grid_systems() {
         }
         tested += 1;
         let order = a.ordering().expect("2-d systems carry the grid order");
-        let factor = UpLookingCholesky::factorize(a, order).unwrap();
+        let factor = UpLookingCholesky::factorize(a.csr(), order).unwrap();
         let b = random_vec(a.nrows(), seed + 100);
         let x = factor.solve(&b);
         let amd = without_ordering(a);
@@ -719,7 +584,7 @@ fn up_looking_cholesky_matches_faer_on_random_grid_systems() {
         );
         assert!(residual(a, &x, &b) <= 1e-10 * norm(&b), "seed {seed}");
         // The same elimination order gives the same factor structure as faer's analysis.
-        let faer_ordered = native::ordered_cholesky(a, order.to_vec().into()).unwrap();
+        let faer_ordered = factor::ordered_cholesky(a.csr(), order.to_vec().into()).unwrap();
         assert_eq!(
             Some(factor.entries()),
             faer_ordered.factor_entries(),
@@ -739,7 +604,7 @@ fn up_looking_cholesky_solves_random_spd_matrices_in_any_order() {
         let a = random_spd(n, per_row, seed);
         let mut order: Vec<usize> = (0..n).collect();
         order.shuffle(&mut rand::rngs::StdRng::seed_from_u64(seed));
-        let factor = UpLookingCholesky::factorize(&a, &order).unwrap();
+        let factor = UpLookingCholesky::factorize(a.csr(), &order).unwrap();
         for column in 0..3 {
             let b = random_vec(n, seed * 10 + column);
             let x = factor.solve(&b);
@@ -848,7 +713,7 @@ fn split_product_equals_the_csr_product() {
     ] {
         let a = random_spd(n, per_row, seed);
         let width = (0..n).map(|i| far_entries(&a, i)).max().unwrap();
-        let Some(split) = SplitMatrix::new(&a) else {
+        let Some(split) = SplitMatrix::new(a.csr()) else {
             assert!(width > 8, "n {n}: refused a layout of width {width}");
             continue;
         };
@@ -872,7 +737,7 @@ fn split_product_equals_the_csr_product() {
     // A row with more far entries than the layout takes: no split.
     let wide = random_spd(40, 12, 6);
     assert!((0..40).any(|i| far_entries(&wide, i) > 8));
-    assert!(SplitMatrix::new(&wide).is_none());
+    assert!(SplitMatrix::new(wide.csr()).is_none());
 }
 
 /// A matrix whose elimination drops no fill (a tree, children numbered before their parents)
@@ -903,7 +768,7 @@ fn mic0_is_exact_where_no_fill_is_dropped() {
             triplets.push((i, i, d + rng.random_range(0.1..1.0)));
         }
         let a = SparseMatrix::from_triplets(n, n, &triplets).unwrap();
-        let split = SplitMatrix::new(&a).expect("short rows");
+        let split = SplitMatrix::new(a.csr()).expect("short rows");
         let mic = ModifiedIncompleteCholesky::new(&split).expect("an M-matrix");
         let x = random_vec(n, n as u64);
         let ax = a.mul_vec(&x);

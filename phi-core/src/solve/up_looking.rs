@@ -15,7 +15,7 @@
 //! The work is the factor's flops plus `O(|L|)` integer operations; nothing is sorted.
 
 use super::SolveError;
-use super::sparse::SparseMatrix;
+use super::csr::CsrRef;
 
 /// Marks an absent parent in the elimination tree and an unvisited node.
 const NONE: u32 = u32::MAX;
@@ -38,13 +38,13 @@ impl UpLookingCholesky {
     pub(crate) const MAX_ROWS: usize = u32::MAX as usize - 1;
 
     /// Factorises the symmetric `matrix` in the elimination order `order` (a permutation of
-    /// `0..n`; [`SparseMatrix::with_ordering`] checks it). Only the entries of `matrix` on and
+    /// `0..n`; [`super::SparseMatrix::with_ordering`] checks it). Only the entries of `matrix` on and
     /// below the diagonal of the permuted matrix are read.
     ///
     /// # Errors
     /// [`SolveError::Factorization`] when a pivot is not positive (the matrix is not positive
     /// definite) or the matrix has more than [`Self::MAX_ROWS`] rows.
-    pub(crate) fn factorize(matrix: &SparseMatrix, order: &[usize]) -> Result<Self, SolveError> {
+    pub(crate) fn factorize(matrix: CsrRef<'_>, order: &[usize]) -> Result<Self, SolveError> {
         let failed = |reason: String| SolveError::Factorization {
             method: "Cholesky",
             reason,
