@@ -8,8 +8,8 @@ use phi_core::fields::{
     particles_to_staggered_affine, pressure_projection, sample_staggered,
     sample_staggered_gradient, valid_faces,
 };
+use phi_core::host::all_finite;
 use phi_core::solve::{SolveOptions, SolveStats};
-use phi_core::tensor::all_finite;
 use phi_core::{Tensor, TensorError};
 use phi_geom::{Geometry, Obstacle, PushDirection};
 

@@ -18,7 +18,7 @@
 //! ([`SplitMatrix`]).
 
 use super::csr::CsrRef;
-use crate::tensor::all_finite;
+use crate::host::all_finite;
 
 /// The share of each dropped fill entry moved to the diagonal (Bridson's choice).
 const TAU: f64 = 0.97;
