@@ -5,7 +5,6 @@
 pub mod backend;
 pub mod error;
 pub mod fields;
-pub mod io;
 pub mod solve;
 pub mod tensor;
 

@@ -12,7 +12,7 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-/// Errors of the file formats in [`crate::io`].
+/// Errors of the file formats of this crate.
 #[derive(Debug, thiserror::Error)]
 pub enum IoError {
     /// An operating-system I/O operation on `path` failed.
@@ -115,7 +115,7 @@ fn temp_path(path: &Path) -> Result<PathBuf, IoError> {
 /// ```
 /// # let dir = std::env::temp_dir().join(format!("phi-doc-atomic-{}", std::process::id()));
 /// # std::fs::create_dir_all(&dir).unwrap();
-/// use phi_core::io::{IoError, write_all, write_atomic};
+/// use phi_io::{IoError, write_all, write_atomic};
 /// let path = dir.join("hello.txt");
 /// write_atomic(&path, |w| write_all(w, b"hello", &path))?;
 /// assert_eq!(std::fs::read(&path).unwrap(), b"hello");

@@ -21,7 +21,7 @@ use std::io::{self, BufReader, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};
 
-use super::{IoError, write_all, write_atomic};
+use crate::{IoError, write_all, write_atomic};
 
 /// The elements of an array, in C (row-major) order.
 #[derive(Debug, Clone, PartialEq)]
@@ -1049,17 +1049,17 @@ fn write_zip(
 /// ```
 /// # let dir = std::env::temp_dir().join(format!("phi-doc-npz-streamed-{}", std::process::id()));
 /// # std::fs::create_dir_all(&dir).unwrap();
-/// use phi_core::io::npz::{NpyArray, read_npz, write_npz_streamed};
+/// use phi_io::npz::{NpyArray, read_npz, write_npz_streamed};
 /// let path = dir.join("many.npz");
 /// write_npz_streamed(&path, |npz| {
 ///     for i in 0..3i64 {
 ///         npz.add(&format!("a{i}"), &NpyArray::from_vec(vec![i]))?;
 ///     }
-///     Ok::<(), phi_core::io::IoError>(())
+///     Ok::<(), phi_io::IoError>(())
 /// })?;
 /// assert_eq!(read_npz(&path)?.len(), 3);
 /// # std::fs::remove_dir_all(&dir).unwrap();
-/// # Ok::<(), phi_core::io::IoError>(())
+/// # Ok::<(), phi_io::IoError>(())
 /// ```
 pub fn write_npz_streamed<E: From<IoError>>(
     path: impl AsRef<Path>,
@@ -1480,7 +1480,7 @@ pub struct NpyHeader {
 /// ```
 /// # let dir = std::env::temp_dir().join(format!("phi-doc-npz-reader-{}", std::process::id()));
 /// # std::fs::create_dir_all(&dir).unwrap();
-/// use phi_core::io::npz::{NpyArray, NpzReader, write_npz};
+/// use phi_io::npz::{NpyArray, NpzReader, write_npz};
 /// let path = dir.join("a.npz");
 /// let big = NpyArray::from_vec(vec![0f32; 1000]);
 /// let small = NpyArray::from_vec(vec![7i64]);
@@ -1489,7 +1489,7 @@ pub struct NpyHeader {
 /// assert_eq!(npz.names().collect::<Vec<_>>(), ["big", "small"]);
 /// assert_eq!(npz.read("small")?.as_i64(), Some(&[7i64][..]));
 /// # std::fs::remove_dir_all(&dir).unwrap();
-/// # Ok::<(), phi_core::io::IoError>(())
+/// # Ok::<(), phi_io::IoError>(())
 /// ```
 pub struct NpzReader {
     archive: Archive,
@@ -1664,7 +1664,7 @@ pub fn read_npz(path: impl AsRef<Path>) -> Result<Vec<(String, NpyArray)>, IoErr
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::io::test_util::temp_dir;
+    use crate::test_util::temp_dir;
     use std::process::Command;
 
     fn sample_arrays() -> Vec<(&'static str, NpyArray)> {
