@@ -6,7 +6,6 @@ pub mod backend;
 pub mod error;
 pub mod fields;
 pub mod host;
-pub mod io;
 pub mod solve;
 pub mod tensor;
 

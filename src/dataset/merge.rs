@@ -190,8 +190,8 @@ pub fn merge(out: &Path, shards: &[PathBuf]) -> Result<MergeSummary> {
     };
     let text = serde_json::to_string_pretty(&manifest)?;
     let path = out.join(MANIFEST);
-    phi_core::io::write_atomic::<phi_core::io::IoError>(&path, |w| {
-        phi_core::io::write_all(w, text.as_bytes(), &path)
+    phi_io::write_atomic::<phi_io::IoError>(&path, |w| {
+        phi_io::write_all(w, text.as_bytes(), &path)
     })?;
     write_dataset_metadata(out, &config, &counts, Shard::default())?;
     Ok(summary)

@@ -2,21 +2,21 @@
 //!
 //! - [`npz`]: reading and writing NumPy `.npy` arrays and `.npz` archives ([`write_npz`],
 //!   [`read_npz`]), so that trajectories can be exchanged with Python tooling; it lives in
-//!   [`phi_core::io::npz`] (so that the library crates can use it) and is re-exported here;
+//!   [`phi_io::npz`] (so that the library crates can use it) and is re-exported here;
 //! - [`render`]: drawing particle frames ([`render_frame`]) and saving them as PNG pictures
 //!   ([`write_png`]) or streamed animated GIFs ([`GifWriter`]).
 //!
 //! Every fallible function returns [`OutputError`]; errors about a file name it.
 //! Files that are written in one go ([`write_npz`], [`write_npy`], [`write_png`]) are written
-//! atomically ([`phi_core::io::write_atomic`]): into a temporary file `.{filename}.tmp-{pid}` in
+//! atomically ([`phi_io::write_atomic`]): into a temporary file `.{filename}.tmp-{pid}` in
 //! the same directory, which is flushed to disk and then renamed over the destination, so that
 //! readers never see a half-written file.
 
 pub mod render;
 
-/// NumPy `.npy` arrays and `.npz` archives: [`phi_core::io::npz`], re-exported.
+/// NumPy `.npy` arrays and `.npz` archives: [`phi_io::npz`], re-exported.
 pub mod npz {
-    pub use phi_core::io::npz::*;
+    pub use phi_io::npz::*;
 }
 
 use std::path::{Path, PathBuf};
@@ -25,8 +25,8 @@ pub use npz::{
     ArrayData, NpyArray, NpzReader, NpzWriter, read_npy, read_npy_bytes, read_npz, write_npy,
     write_npy_bytes, write_npz, write_npz_streamed,
 };
-pub use phi_core::io::IoError;
-pub(crate) use phi_core::io::write_atomic;
+pub use phi_io::IoError;
+pub(crate) use phi_io::write_atomic;
 pub use render::{
     DEPTH_LEVELS, FrameStyle, GifWriter, KIND_LIQUID, KIND_OBSTACLE, RgbImage, render_frame,
     write_png,
@@ -36,7 +36,7 @@ pub use render::{
 #[derive(Debug, thiserror::Error)]
 pub enum OutputError {
     /// A file operation failed: an operating-system error, or a NumPy file that is damaged or
-    /// unsupported ([`phi_core::io`]); the error names the file.
+    /// unsupported ([`phi_io`]); the error names the file.
     #[error(transparent)]
     File(#[from] IoError),
     /// The arguments of a function are inconsistent (wrong lengths, empty domain, ...).

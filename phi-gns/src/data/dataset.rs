@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use phi_core::io::npz::{NpyArray, write_npz_streamed};
+use phi_io::npz::{NpyArray, write_npz_streamed};
 
 use super::trajectory::{read_trajectory_and_stats, read_trajectory_shape};
 use super::{

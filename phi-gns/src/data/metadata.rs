@@ -4,7 +4,7 @@ use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::Path;
 
-use phi_core::io::{IoError, write_atomic};
+use phi_io::{IoError, write_atomic};
 use serde::{Deserialize, Serialize};
 
 use super::{DataError, LIQUID, OBSTACLE, TrajectoryStats};

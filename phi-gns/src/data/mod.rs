@@ -78,7 +78,7 @@ pub use dataset::{Dataset, SplitReader, export_npz};
 pub use metadata::{
     FORMAT, FORMAT_VERSION, METADATA_FILE, Metadata, Variant, read_metadata, write_metadata,
 };
-pub use phi_core::io::IoError;
+pub use phi_io::IoError;
 pub use stats::{Moments, TrajectoryStats};
 pub use trajectory::{
     Trajectory, read_trajectory, read_trajectory_stats, trajectory_file_name,

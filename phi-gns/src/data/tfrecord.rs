@@ -51,7 +51,7 @@ use std::fs::File;
 use std::io::{BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 
-use phi_core::io::{IoError, write_atomic};
+use phi_io::{IoError, write_atomic};
 
 use super::metadata::{FORMAT, METADATA_FILE};
 use super::{

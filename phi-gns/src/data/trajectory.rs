@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use phi_core::io::npz::{NpyArray, NpzReader, write_npz};
+use phi_io::npz::{NpyArray, NpzReader, write_npz};
 
 use super::{DataError, LIQUID, Moments, OBSTACLE, TrajectoryStats};
 
@@ -298,7 +298,7 @@ fn read_trajectory_from(npz: &mut NpzReader) -> Result<Trajectory, DataError> {
     let position = read_member(npz, "position", 3)?;
     let shape = position.shape.clone();
     let position = match position.data {
-        phi_core::io::npz::ArrayData::F32(v) => v,
+        phi_io::npz::ArrayData::F32(v) => v,
         _ => return Err(wrong_dtype(npz.path(), "position", "float32", &position)),
     };
     let particle_type = read_member(npz, "particle_type", 1)?;

@@ -210,7 +210,7 @@ fn export_npz_holds_every_trajectory_of_the_split() {
     let dataset = Dataset::open(&dir).unwrap();
     let out = dir.join("train.npz");
     assert_eq!(export_npz(&dataset, "train", &out).unwrap(), 3);
-    let arrays = phi_core::io::npz::read_npz(&out).unwrap();
+    let arrays = phi_io::npz::read_npz(&out).unwrap();
     assert_eq!(arrays.len(), 6);
     for (i, traj) in written[0].iter().enumerate() {
         let (name, position) = &arrays[2 * i];

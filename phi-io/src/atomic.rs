@@ -1,94 +1,10 @@
-//! Files: NumPy arrays and archives ([`npz`]) and the atomic writing they share.
-//!
-//! Every fallible function returns [`IoError`]; errors about a file name it. Files that are written
-//! in one go ([`npz::write_npz`], [`npz::write_npy`], and anything written through
-//! [`write_atomic`]) are written atomically: into a temporary file `.{filename}.tmp-{pid}` in the
-//! same directory, which is flushed to disk and then renamed over the destination, so that readers
-//! never see a half-written file.
-
-pub mod npz;
+//! Atomic file writing: a file appears complete under its name or not at all.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-/// Errors of the file formats in [`crate::io`].
-#[derive(Debug, thiserror::Error)]
-pub enum IoError {
-    /// An operating-system I/O operation on `path` failed.
-    #[error("{action} '{path}': {source}", path = path.display())]
-    Io {
-        /// The file (or directory) involved.
-        path: PathBuf,
-        /// What was being done, e.g. "cannot create".
-        action: &'static str,
-        /// The underlying error.
-        #[source]
-        source: std::io::Error,
-    },
-    /// A file exists but its content is not valid: truncated, damaged or not of the expected
-    /// format.
-    #[error("'{path}' is corrupt or truncated: {reason}", path = path.display())]
-    Corrupt {
-        /// The file that was read.
-        path: PathBuf,
-        /// What is wrong with it.
-        reason: String,
-    },
-    /// A file (or in-memory buffer) is valid but uses a feature that this module does not
-    /// support, such as an unsupported dtype or ZIP compression method.
-    #[error("'{path}': unsupported: {reason}", path = path.display())]
-    Unsupported {
-        /// The file that was read (`<memory>` for in-memory buffers).
-        path: PathBuf,
-        /// What is not supported.
-        reason: String,
-    },
-    /// An in-memory `.npy` buffer given to [`npz::read_npy_bytes`] is invalid.
-    #[error("invalid .npy data: {reason}")]
-    InvalidNpy {
-        /// What is wrong with it.
-        reason: String,
-    },
-    /// An array's shape does not match the number of elements of its data.
-    #[error("array shape {shape:?} does not fit data of {len} elements")]
-    ShapeMismatch {
-        /// The shape.
-        shape: Vec<usize>,
-        /// The number of elements in the data.
-        len: usize,
-    },
-    /// An archive has no array of the name asked for.
-    #[error("'{path}' has no array named '{name}'", path = path.display())]
-    MissingArray {
-        /// The archive.
-        path: PathBuf,
-        /// The name of the array.
-        name: String,
-    },
-    /// The arguments of a function are inconsistent (wrong lengths, bad names, ...).
-    #[error("invalid input: {0}")]
-    InvalidInput(String),
-}
-
-impl IoError {
-    /// Wraps an I/O error with the path and the action that failed.
-    pub fn io(path: &Path, action: &'static str, source: std::io::Error) -> Self {
-        IoError::Io {
-            path: path.to_path_buf(),
-            action,
-            source,
-        }
-    }
-
-    /// A [`IoError::Corrupt`] error for `path`.
-    pub fn corrupt(path: &Path, reason: impl Into<String>) -> Self {
-        IoError::Corrupt {
-            path: path.to_path_buf(),
-            reason: reason.into(),
-        }
-    }
-}
+use crate::IoError;
 
 /// The temporary file used by [`write_atomic`] for `path`: `.{filename}.tmp-{pid}` in the same
 /// directory.
@@ -115,7 +31,7 @@ fn temp_path(path: &Path) -> Result<PathBuf, IoError> {
 /// ```
 /// # let dir = std::env::temp_dir().join(format!("phi-doc-atomic-{}", std::process::id()));
 /// # std::fs::create_dir_all(&dir).unwrap();
-/// use phi_core::io::{IoError, write_all, write_atomic};
+/// use phi_io::{IoError, write_all, write_atomic};
 /// let path = dir.join("hello.txt");
 /// write_atomic(&path, |w| write_all(w, b"hello", &path))?;
 /// assert_eq!(std::fs::read(&path).unwrap(), b"hello");
@@ -178,25 +94,12 @@ pub fn write_all(w: &mut (impl Write + ?Sized), bytes: &[u8], path: &Path) -> Re
 }
 
 #[cfg(test)]
-pub(crate) mod test_util {
-    use std::path::PathBuf;
-
-    /// A fresh, empty directory under the system's temporary directory for one test.
-    pub fn temp_dir(test: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("phi-io-test-{}-{test}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("create test directory");
-        dir
-    }
-}
-
-#[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn atomic_write_replaces_file_and_leaves_no_temp() {
-        let dir = test_util::temp_dir("atomic");
+        let dir = crate::test_util::temp_dir("atomic");
         let path = dir.join("out.bin");
         std::fs::write(&path, b"old").unwrap();
         write_atomic(&path, |w| write_all(w, b"new", &path)).unwrap();
@@ -211,7 +114,7 @@ mod tests {
 
     #[test]
     fn failed_atomic_write_keeps_old_file() {
-        let dir = test_util::temp_dir("atomic-fail");
+        let dir = crate::test_util::temp_dir("atomic-fail");
         let path = dir.join("out.bin");
         std::fs::write(&path, b"old").unwrap();
         let err = write_atomic(&path, |_| Err(IoError::InvalidInput("boom".into())));
