@@ -22,7 +22,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use phi_core::AutodiffBackend;
 use phi_core::fields::LatticeKernels;
-use phi_flip::loss::set_distances;
+use phi_core::point_sets::set_distances;
 use phi_flip::optimize::{IterationRecord, LossSpec};
 use phi_flip::{OptimizeConfig, OptimizeProblem};
 use serde::Serialize;

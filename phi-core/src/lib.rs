@@ -6,6 +6,7 @@ pub mod backend;
 pub mod error;
 pub mod fields;
 pub mod host;
+pub mod point_sets;
 pub mod solve;
 pub mod tensor;
 

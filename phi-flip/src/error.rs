@@ -1,6 +1,7 @@
 //! [`FlipError`], the error type of the simulator.
 
 use phi_core::TensorError;
+use phi_core::point_sets::PointSetError;
 use phi_core::solve::SolveError;
 use phi_geom::GeomError;
 use thiserror::Error;
@@ -56,3 +57,17 @@ pub enum FlipError {
 
 /// The result type of the simulator.
 pub type Result<T, E = FlipError> = std::result::Result<T, E>;
+
+/// The simulator compares point sets only with a loss's target, so a point set that cannot be
+/// compared is an invalid `target`; tensor errors stay tensor errors.
+impl From<PointSetError> for FlipError {
+    fn from(error: PointSetError) -> Self {
+        match error {
+            PointSetError::Tensor(source) => FlipError::Tensor(source),
+            invalid @ PointSetError::Invalid { .. } => FlipError::InvalidParameter {
+                name: "target",
+                reason: invalid.to_string(),
+            },
+        }
+    }
+}

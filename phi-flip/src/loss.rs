@@ -1,23 +1,23 @@
-//! Losses between a simulated particle set and a target: the thesis' L2 loss (particle `i`
-//! against target point `i`), and two permutation-invariant losses the thesis proposes as the
-//! remedy for its stalled optimisations (section 4.3, chapter 6): the debiased Sinkhorn
-//! divergence between the point sets and an L2 loss on the liquid's density on the grid and
-//! on coarser grids.
+//! Losses between a simulated particle set and a target, as the optimisation through FLIP
+//! chooses them ([`Loss`]): the thesis' L2 loss and the Sinkhorn divergence (both from
+//! [`phi_core::point_sets`]), and the loss that needs the simulation's grid, an L2 loss on the
+//! liquid's density on the grid and on coarser grids, which the thesis proposes with the
+//! Sinkhorn divergence as the remedy for its stalled optimisations (section 4.3, chapter 6).
 //!
 //! Every loss is built from tensor operations and returns a one-element tensor `[1]`, so it is
 //! differentiable on the autodiff backends. Point sets are `[N, d]` in domain units.
 
 use phi_core::Tensor;
-use phi_core::backend::{Backend, ReduceOp};
 use phi_core::fields::LatticeKernels;
 use phi_core::fields::{Domain, PointCloud, Transfer, particles_to_centered};
+use phi_core::point_sets::{SinkhornOptions, check_point_sets, l2_loss, sinkhorn_divergence};
 
 use crate::error::{FlipError, Result};
 
 /// Which loss compares the simulated particles with the target.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Loss {
-    /// `½ Σᵢ |xᵢ − tᵢ|²`: particle `i` against target point `i` (Φ_Flow's `l2_loss`, the
+    /// `½ Σᵢ |xᵢ − tᵢ|²`: particle `i` against target point `i` ([`l2_loss`], Φ_Flow's, the
     /// thesis). Needs as many target points as particles.
     L2,
     /// The debiased Sinkhorn divergence ([`sinkhorn_divergence`]) with entropic blur
@@ -49,7 +49,7 @@ impl Loss {
         domain: &Domain,
     ) -> Result<Tensor<B>> {
         match *self {
-            Loss::L2 => l2_loss(positions, target),
+            Loss::L2 => Ok(l2_loss(positions, target)?),
             Loss::Sinkhorn { epsilon } => {
                 let n = positions.shape()[0] as f32;
                 Ok(sinkhorn_divergence(positions, target, &SinkhornOptions::new(epsilon))? * n)
@@ -72,291 +72,6 @@ fn invalid(reason: String) -> FlipError {
     FlipError::InvalidParameter {
         name: "target",
         reason,
-    }
-}
-
-/// Checks that `a` and `b` are non-empty `[·, d]` point sets of the same `d`; returns `(N, M, d)`.
-fn check_point_sets<B: Backend>(
-    what: &str,
-    a: &Tensor<B>,
-    b: &Tensor<B>,
-) -> Result<(usize, usize, usize)> {
-    let (sa, sb) = (a.shape(), b.shape());
-    if sa.len() != 2 || sb.len() != 2 {
-        return Err(invalid(format!(
-            "{what}: point sets are [N, d] tensors, got shapes {sa:?} and {sb:?}"
-        )));
-    }
-    if sa[1] != sb[1] {
-        return Err(invalid(format!(
-            "{what}: the particles are {}-dimensional but the target points are {}-dimensional",
-            sa[1], sb[1]
-        )));
-    }
-    if sa[0] == 0 || sb[0] == 0 {
-        return Err(invalid(format!(
-            "{what}: empty point set ({} particles, {} target points)",
-            sa[0], sb[0]
-        )));
-    }
-    Ok((sa[0], sb[0], sa[1]))
-}
-
-/// `½ Σᵢ |xᵢ − tᵢ|²` over particles `i` (Φ_Flow's `l2_loss`, as in the thesis: with learning
-/// rate 1, a gradient step moves a particle by its whole residual when the map is the identity).
-///
-/// # Errors
-/// [`FlipError::InvalidParameter`] for empty sets, different dimensions or counts.
-pub fn l2_loss<B: Backend>(positions: &Tensor<B>, target: &Tensor<B>) -> Result<Tensor<B>> {
-    let (n, m, _) = check_point_sets("l2 loss", positions, target)?;
-    if n != m {
-        return Err(invalid(format!(
-            "l2 loss: compares particle i with target point i, but there are {n} particles and \
-             {m} target points (use loss = \"sinkhorn\" or \"density\" for sets of different size)"
-        )));
-    }
-    Ok((positions - target).square().sum() * 0.5)
-}
-
-/// Options of [`sinkhorn_divergence`].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SinkhornOptions {
-    /// Entropic regularisation `ε` (domain units², the cost is `½|x − y|²`).
-    pub epsilon: f32,
-    /// ε-scaling: the potentials are first solved at `ε = diameter²` and `ε` shrinks by this
-    /// factor per iteration down to `epsilon` (geomloss' annealing; 0.7 is a safe default).
-    pub scaling: f64,
-    /// At the final `ε`, iterate until no potential changes by more than this (domain
-    /// units²)...
-    pub tolerance: f64,
-    /// ... or this many iterations.
-    pub max_iterations: usize,
-}
-
-impl SinkhornOptions {
-    /// `epsilon` with ε-scaling factor 0.7, then at most 1000 iterations at the final ε to a
-    /// tolerance of `10⁻⁶ ε`.
-    pub fn new(epsilon: f32) -> Self {
-        Self {
-            epsilon,
-            scaling: 0.7,
-            tolerance: 1e-6 * f64::from(epsilon),
-            max_iterations: 1000,
-        }
-    }
-}
-
-/// The debiased Sinkhorn divergence `S(a, b) = OT_ε(a, b) − ½ OT_ε(a, a) − ½ OT_ε(b, b)` between
-/// the uniform measures on the point sets `a` `[N, d]` and `b` `[M, d]`, with cost `½|x − y|²`
-/// (Feydy et al. 2019). `S ≥ 0`, `S(a, a) = 0`, it is invariant to the order of the points, and
-/// for `ε → 0` it tends to `½ W₂²`.
-///
-/// The dual potentials are found by log-domain Sinkhorn iterations with ε-scaling, on the host in
-/// `f64` and detached (they are optimal, so by the envelope theorem their derivative does not
-/// enter the gradient). One last update `f = −ε log Σⱼ βⱼ exp((gⱼ − C(aᵢ, bⱼ))/ε)` is taken with
-/// tensor operations on the tracked points: its value at convergence is the potential and its
-/// gradient is `Σⱼ πᵢⱼ ∇C(aᵢ, bⱼ)`, the gradient of `OT_ε`.
-///
-/// # Errors
-/// [`FlipError::InvalidParameter`] for empty sets, different dimensions or a `ε ≤ 0`.
-pub fn sinkhorn_divergence<B: Backend>(
-    a: &Tensor<B>,
-    b: &Tensor<B>,
-    options: &SinkhornOptions,
-) -> Result<Tensor<B>> {
-    check_point_sets("sinkhorn divergence", a, b)?;
-    if !(options.epsilon.is_finite() && options.epsilon > 0.0) {
-        return Err(invalid(format!(
-            "sinkhorn divergence: epsilon must be positive and finite, got {}",
-            options.epsilon
-        )));
-    }
-    let (ha, hb) = (a.to_vec(), b.to_vec());
-    let d = a.shape()[1];
-    let potentials = HostSinkhorn::new(&ha, &hb, d, options);
-    let ot_ab = dual_cost(a, b, &potentials.g_ab, options.epsilon)?;
-    let ot_aa = dual_cost(a, a, &potentials.f_aa, options.epsilon)?;
-    let ot_bb = dual_cost(b, b, &potentials.g_bb, options.epsilon)?;
-    Ok(ot_ab - (ot_aa + ot_bb) * 0.5)
-}
-
-/// `OT_ε(x, y) = ⟨α, T(g)⟩ + ⟨β, g⟩`, where `T(g)ᵢ = −ε log Σⱼ βⱼ exp((gⱼ − Cᵢⱼ)/ε)` is computed
-/// with tensor operations from the tracked points and the detached optimal potential `g` on `y`
-/// (so `T(g)` is the potential on `x`), and `⟨β, g⟩` is a constant. Its gradient is
-/// `Σᵢⱼ πᵢⱼ dCᵢⱼ`, through both arguments of the cost: taking `T` once is what makes the
-/// gradient of the symmetric `OT(a, a)` right too (not twice it).
-fn dual_cost<B: Backend>(
-    x: &Tensor<B>,
-    y: &Tensor<B>,
-    g: &[f64],
-    epsilon: f32,
-) -> Result<Tensor<B>> {
-    let (n, m) = (x.shape()[0], y.shape()[0]);
-    let device = x.device();
-    let cost = (x.unsqueeze(1)? - &y.unsqueeze(0)?).square().sum_axis(2)? * 0.5;
-    let log_beta = -(m as f64).ln();
-    let g_row: Vec<f32> = g
-        .iter()
-        .map(|&v| (v / f64::from(epsilon) + log_beta) as f32)
-        .collect();
-    let g_row = Tensor::from_vec(g_row, &[1, m], &device)?;
-    let exponent = g_row - cost * (1.0 / epsilon);
-    let max = exponent.detach().reduce_axis(ReduceOp::Max, 1, true)?;
-    let log_sum = (exponent - &max)
-        .exp()
-        .sum_axis(1)?
-        .log()
-        .reshape(&[n, 1])?
-        + max;
-    let f = log_sum * (-epsilon);
-    let other = g.iter().sum::<f64>() / g.len() as f64;
-    Ok(f.mean() + other as f32)
-}
-
-/// Log-domain Sinkhorn potentials on the host: `f_ab, g_ab` for `OT(a, b)` and the symmetric
-/// `f_aa`, `g_bb`.
-struct HostSinkhorn {
-    /// Potential on `a` of `OT(a, b)`.
-    f_ab: Vec<f64>,
-    /// Potential on `b` of `OT(a, b)`.
-    g_ab: Vec<f64>,
-    /// The symmetric potential of `OT(a, a)`.
-    f_aa: Vec<f64>,
-    /// The symmetric potential of `OT(b, b)`.
-    g_bb: Vec<f64>,
-}
-
-/// `½ |x − y|²` for every pair, row-major `[N, M]`.
-fn host_cost(a: &[f32], b: &[f32], d: usize) -> Vec<f64> {
-    let mut cost = Vec::with_capacity(a.len() / d * (b.len() / d));
-    for x in a.chunks(d) {
-        for y in b.chunks(d) {
-            let s: f64 = x
-                .iter()
-                .zip(y)
-                .map(|(p, q)| (f64::from(*p) - f64::from(*q)).powi(2))
-                .sum();
-            cost.push(0.5 * s);
-        }
-    }
-    cost
-}
-
-/// `T(g)ᵢ = −ε log (1/M) Σⱼ exp((gⱼ − Cᵢⱼ)/ε)` for a row-major cost `[N, M]`; `transpose` reads it
-/// as `[M, N]`.
-fn softmin(cost: &[f64], n: usize, m: usize, g: &[f64], eps: f64, transpose: bool) -> Vec<f64> {
-    let at = |i: usize, j: usize| {
-        if transpose {
-            cost[j * n + i]
-        } else {
-            cost[i * m + j]
-        }
-    };
-    let log_m = (m as f64).ln();
-    (0..n)
-        .map(|i| {
-            let mut max = f64::NEG_INFINITY;
-            for (j, gj) in g.iter().enumerate() {
-                max = max.max((gj - at(i, j)) / eps);
-            }
-            let sum: f64 = g
-                .iter()
-                .enumerate()
-                .map(|(j, gj)| ((gj - at(i, j)) / eps - max).exp())
-                .sum();
-            -eps * (max + sum.ln() - log_m)
-        })
-        .collect()
-}
-
-/// The annealing schedule: `diameter²` shrinking by `scaling` down to (excluding) `epsilon`.
-fn epsilon_schedule(diameter2: f64, options: &SinkhornOptions) -> Vec<f64> {
-    let target = f64::from(options.epsilon);
-    let mut schedule = Vec::new();
-    let mut eps = diameter2.max(target);
-    while eps > target {
-        schedule.push(eps);
-        eps *= options.scaling.clamp(0.1, 0.95);
-    }
-    schedule
-}
-
-fn largest_change(old: &[f64], new: &[f64]) -> f64 {
-    old.iter()
-        .zip(new)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0, f64::max)
-}
-
-impl HostSinkhorn {
-    fn new(a: &[f32], b: &[f32], d: usize, options: &SinkhornOptions) -> Self {
-        let (n, m) = (a.len() / d, b.len() / d);
-        let diameter2 = {
-            let mut lo = vec![f32::INFINITY; d];
-            let mut hi = vec![f32::NEG_INFINITY; d];
-            for p in a.chunks(d).chain(b.chunks(d)) {
-                for k in 0..d {
-                    lo[k] = lo[k].min(p[k]);
-                    hi[k] = hi[k].max(p[k]);
-                }
-            }
-            (0..d)
-                .map(|k| f64::from(hi[k] - lo[k]).powi(2))
-                .sum::<f64>()
-        };
-        let schedule = epsilon_schedule(diameter2, options);
-        let eps = f64::from(options.epsilon);
-        let c_ab = host_cost(a, b, d);
-        let (mut f_ab, mut g_ab) = (vec![0.0; n], vec![0.0; m]);
-        for &e in &schedule {
-            // Annealing: simultaneous, averaged updates (geomloss' symmetric Sinkhorn).
-            let f_new = softmin(&c_ab, n, m, &g_ab, e, false);
-            let g_new = softmin(&c_ab, m, n, &f_ab, e, true);
-            average(&mut f_ab, &f_new);
-            average(&mut g_ab, &g_new);
-        }
-        // At the final ε, alternating updates converge much faster than averaged ones; the last
-        // update is `g = T(f)`, and the loss takes `f = T(g)` once more with tracked points.
-        for _ in 0..options.max_iterations.max(1) {
-            let f_new = softmin(&c_ab, n, m, &g_ab, eps, false);
-            let g_new = softmin(&c_ab, m, n, &f_new, eps, true);
-            let change = largest_change(&f_ab, &f_new).max(largest_change(&g_ab, &g_new));
-            (f_ab, g_ab) = (f_new, g_new);
-            if change <= options.tolerance {
-                break;
-            }
-        }
-        let symmetric = |p: &[f32], k: usize| {
-            let c = host_cost(p, p, d);
-            let mut f = vec![0.0; k];
-            for &e in &schedule {
-                let f_new = softmin(&c, k, k, &f, e, false);
-                average(&mut f, &f_new);
-            }
-            // The averaged symmetric update converges in a few iterations (Feydy et al.).
-            for _ in 0..options.max_iterations.max(1) {
-                let mut f_new = softmin(&c, k, k, &f, eps, false);
-                average(&mut f_new, &f);
-                let change = largest_change(&f, &f_new);
-                f = f_new;
-                if change <= options.tolerance {
-                    break;
-                }
-            }
-            f
-        };
-        Self {
-            f_ab,
-            g_ab,
-            f_aa: symmetric(a, n),
-            g_bb: symmetric(b, m),
-        }
-    }
-}
-
-fn average(into: &mut [f64], new: &[f64]) {
-    for (a, b) in into.iter_mut().zip(new) {
-        *a = 0.5 * (*a + b);
     }
 }
 
@@ -458,80 +173,4 @@ pub fn density<B: LatticeKernels>(positions: &Tensor<B>, domain: &Domain) -> Res
     let cloud = PointCloud::new(positions.clone(), ones)?;
     let (_, weights) = particles_to_centered(&cloud, domain, Transfer::Linear)?;
     Ok(weights.values().clone())
-}
-
-/// Distances between point sets on the host, for reporting (not differentiable).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SetDistances {
-    /// Symmetric Chamfer distance: the mean over both sets of the distance to the nearest point
-    /// of the other set (domain units).
-    pub chamfer: f32,
-    /// An earth mover's estimate: `√(2 S_ε)` with a small `ε` (`0.01` domain units²), close to
-    /// the 2-Wasserstein distance between the uniform measures (domain units).
-    pub wasserstein: f32,
-}
-
-/// [`SetDistances`] between `a` and `b` (host data `[N·d]`, `[M·d]`).
-///
-/// # Errors
-/// [`FlipError::InvalidParameter`] for empty sets or lengths that are not multiples of `d`.
-pub fn set_distances(a: &[f32], b: &[f32], d: usize) -> Result<SetDistances> {
-    if d == 0
-        || a.is_empty()
-        || b.is_empty()
-        || !a.len().is_multiple_of(d)
-        || !b.len().is_multiple_of(d)
-    {
-        return Err(invalid(format!(
-            "set distances: need non-empty sets of {d}-dimensional points, got {} and {} values",
-            a.len(),
-            b.len()
-        )));
-    }
-    let chamfer = chamfer_distance(a, b, d);
-    let options = SinkhornOptions {
-        max_iterations: 300,
-        ..SinkhornOptions::new(0.01)
-    };
-    let s = host_sinkhorn_divergence(a, b, d, &options);
-    Ok(SetDistances {
-        chamfer,
-        wasserstein: (2.0 * s.max(0.0)).sqrt() as f32,
-    })
-}
-
-/// Symmetric Chamfer distance between host point sets `[N·d]`, `[M·d]`: the mean over both sets
-/// of the distance to the nearest point of the other (domain units); `NaN` for an empty set.
-pub fn chamfer_distance(a: &[f32], b: &[f32], d: usize) -> f32 {
-    if d == 0 || a.is_empty() || b.is_empty() {
-        return f32::NAN;
-    }
-    let nearest = |from: &[f32], to: &[f32]| -> f64 {
-        let count = from.len() / d;
-        from.chunks(d)
-            .map(|x| {
-                to.chunks(d)
-                    .map(|y| {
-                        x.iter()
-                            .zip(y)
-                            .map(|(p, q)| f64::from(p - q).powi(2))
-                            .sum::<f64>()
-                    })
-                    .fold(f64::INFINITY, f64::min)
-                    .sqrt()
-            })
-            .sum::<f64>()
-            / count as f64
-    };
-    (0.5 * (nearest(a, b) + nearest(b, a))) as f32
-}
-
-/// The Sinkhorn divergence computed entirely on the host (for reporting).
-fn host_sinkhorn_divergence(a: &[f32], b: &[f32], d: usize, options: &SinkhornOptions) -> f64 {
-    let p = HostSinkhorn::new(a, b, d, options);
-    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
-    let ot_ab = mean(&p.f_ab) + mean(&p.g_ab);
-    let ot_aa = 2.0 * mean(&p.f_aa);
-    let ot_bb = 2.0 * mean(&p.g_bb);
-    ot_ab - 0.5 * (ot_aa + ot_bb)
 }

@@ -32,6 +32,7 @@ use std::path::Path;
 
 use phi_core::fields::Domain;
 use phi_core::fields::LatticeKernels;
+use phi_core::point_sets::chamfer_distance;
 use phi_core::{AutodiffBackend, Backend, Tensor};
 use phi_geom::Geometry;
 use rand::SeedableRng;
@@ -40,7 +41,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::error::FlipError;
-use crate::loss::{Loss, chamfer_distance};
+use crate::loss::Loss;
 use crate::scene::{PlacementSpec, Scene};
 use crate::seed::Placement;
 use crate::sim::{FlipSimulation, Particles, SceneParameters};

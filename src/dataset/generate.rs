@@ -15,12 +15,12 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use phi_io::write_atomic;
 use phi_flip::{RandomSceneParams, SceneVariant};
 use phi_gns::data::{
     LIQUID, OBSTACLE, Trajectory, TrajectoryStats, read_trajectory, trajectory_file_name,
     write_trajectory,
 };
+use phi_io::write_atomic;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -164,9 +164,7 @@ pub fn read_manifest(dir: &Path) -> Result<Option<Manifest>> {
 fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<()> {
     let text = serde_json::to_string_pretty(manifest)?;
     let path = dir.join(MANIFEST);
-    write_atomic::<phi_io::IoError>(&path, |w| {
-        phi_io::write_all(w, text.as_bytes(), &path)
-    })?;
+    write_atomic::<phi_io::IoError>(&path, |w| phi_io::write_all(w, text.as_bytes(), &path))?;
     Ok(())
 }
 

@@ -1,7 +1,7 @@
 //! Gradients through FLIP steps on the autodiff backends: with respect to the initial particle
 //! positions and velocities, the gravity, an obstacle's position and an inflow's velocity,
-//! against central finite differences, and Burn against libtorch; the Sinkhorn divergence's
-//! properties and gradient.
+//! against central finite differences, and Burn against libtorch. (The losses' gradients are
+//! tested with them, in `phi_core::point_sets`.)
 //!
 //! # Tolerances
 //! The loss `L = Σ w ⊙ x_N + Σ w' ⊙ v_N` (fixed pseudo-random weights) is piecewise smooth: the
@@ -19,7 +19,6 @@
 use phi_core::fields::LatticeKernels;
 use phi_core::fields::{Boundary, Domain};
 use phi_core::{AutodiffBackend, Backend, Tensor};
-use phi_flip::loss::{SinkhornOptions, l2_loss, sinkhorn_divergence};
 use phi_flip::{FlipParams, FlipSimulation, Inflow, Particles, SceneParameters};
 use phi_geom::{Geometry, Obstacle};
 
@@ -39,8 +38,6 @@ for_each_autodiff_backend!(
     gradients_of_a_falling_block_match_finite_differences,
     gradients_with_an_obstacle_match_finite_differences,
     gradients_with_an_inflow_match_finite_differences,
-    sinkhorn_divergence_is_a_divergence,
-    sinkhorn_and_l2_gradients_match_finite_differences,
 );
 
 const H: f32 = 1e-2;
@@ -313,98 +310,6 @@ fn burn_and_tch_gradients_agree() {
             println!("{name}: input {k}: largest difference {worst:.2e}");
             // Both are f32 with different operation orders; four steps amplify round-off.
             assert!(worst <= 1e-3, "{name}: input {k}: burn {a:?} vs tch {b:?}");
-        }
-    }
-}
-
-fn points<B: Backend>(values: &[f32]) -> Tensor<B> {
-    Tensor::from_vec(
-        values.to_vec(),
-        &[values.len() / 2, 2],
-        &B::default_device(),
-    )
-    .unwrap()
-}
-
-fn cloud(n: usize, seed: f32, shift: f32) -> Vec<f32> {
-    (0..2 * n)
-        .map(|k| 2.0 * (seed + 0.77 * k as f32).sin() + 3.0 + if k % 2 == 0 { shift } else { 0.0 })
-        .collect()
-}
-
-fn sinkhorn_divergence_is_a_divergence<B: AutodiffBackend>() {
-    let options = SinkhornOptions::new(0.1);
-    let a = cloud(12, 0.3, 0.0);
-    let b = cloud(9, 1.7, 1.5);
-    let s = |x: &[f32], y: &[f32]| {
-        sinkhorn_divergence(&points::<B>(x), &points::<B>(y), &options)
-            .unwrap()
-            .to_scalar()
-            .unwrap()
-    };
-    // S(a, a) = 0 and S ≥ 0.
-    let aa = s(&a, &a);
-    assert!(aa.abs() < 1e-4, "S(a, a) = {aa}");
-    let ab = s(&a, &b);
-    assert!(ab > 0.1, "S(a, b) = {ab}");
-    assert!((s(&b, &a) - ab).abs() < 1e-4 * ab.max(1.0));
-    // Invariant to the order of the points of either set.
-    let mut permuted = Vec::new();
-    for i in (0..12)
-        .rev()
-        .step_by(2)
-        .chain((0..12).rev().skip(1).step_by(2))
-    {
-        permuted.extend_from_slice(&a[2 * i..2 * i + 2]);
-    }
-    assert_ne!(permuted, a);
-    let ab_permuted = s(&permuted, &b);
-    assert!(
-        (ab_permuted - ab).abs() < 1e-4 * ab,
-        "{ab_permuted} vs {ab}"
-    );
-    // A translated copy: with a small ε, S ≈ ½ |shift|² (the optimal plan is the translation).
-    let shifted: Vec<f32> = a
-        .iter()
-        .enumerate()
-        .map(|(k, v)| if k % 2 == 0 { v + 0.5 } else { *v })
-        .collect();
-    let t = s(&a, &shifted);
-    assert!(
-        (t - 0.125).abs() < 0.02,
-        "S(a, a + 0.5 e₀) = {t}, want ≈ 0.125"
-    );
-}
-
-fn sinkhorn_and_l2_gradients_match_finite_differences<B: AutodiffBackend>() {
-    let a = cloud(10, 0.3, 0.0);
-    let b = cloud(10, 1.7, 1.0);
-    let target = points::<B>(&b);
-    for (name, options) in [
-        ("sinkhorn ε=0.5", Some(SinkhornOptions::new(0.5))),
-        ("sinkhorn ε=0.05", Some(SinkhornOptions::new(0.05))),
-        ("l2", None),
-    ] {
-        let eval = |x: &Tensor<B>| match &options {
-            Some(o) => sinkhorn_divergence(x, &target, o).unwrap(),
-            None => l2_loss(x, &target).unwrap(),
-        };
-        let x = points::<B>(&a).require_grad();
-        let g = eval(&x).gradients(&[&x]).unwrap()[0].to_vec();
-        for e in 0..a.len() {
-            let (mut plus, mut minus) = (a.clone(), a.clone());
-            plus[e] += H;
-            minus[e] -= H;
-            let fd = (eval(&points::<B>(&plus)).to_scalar().unwrap()
-                - eval(&points::<B>(&minus)).to_scalar().unwrap())
-                / (2.0 * H);
-            // The potentials are re-solved at every evaluation (to the Sinkhorn iterations'
-            // accuracy, ~1e-5 relative), and the loss is O(1): the FD error is ~1e-3.
-            assert!(
-                (g[e] - fd).abs() <= 3e-3 + 1e-2 * fd.abs(),
-                "{name}: ∂S/∂a[{e}] backprop {} vs finite differences {fd}",
-                g[e]
-            );
         }
     }
 }
