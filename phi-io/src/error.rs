@@ -34,7 +34,7 @@ pub enum IoError {
         /// What is not supported.
         reason: String,
     },
-    /// An in-memory `.npy` buffer given to [`npz::read_npy_bytes`] is invalid.
+    /// An in-memory `.npy` buffer given to [`crate::npy::read_npy_bytes`] is invalid.
     #[error("invalid .npy data: {reason}")]
     InvalidNpy {
         /// What is wrong with it.
