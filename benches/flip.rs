@@ -37,7 +37,7 @@ fn bench_backend<B: LatticeKernels>(c: &mut Criterion) {
 }
 
 fn benches(c: &mut Criterion) {
-    common::on_every_backend!(c, bench_backend);
+    phi_core::for_each_backend!(B => bench_backend::<B>(c));
 }
 
 criterion_group! {

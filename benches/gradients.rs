@@ -145,10 +145,7 @@ fn bench_backend<B: AutodiffBackend + LatticeKernels>(c: &mut Criterion) {
 
 fn benches(c: &mut Criterion) {
     let _ = &c; // no autodiff backend compiled in: nothing to measure
-    #[cfg(feature = "burn")]
-    bench_backend::<phi_core::backend::burn::Burn>(c);
-    #[cfg(feature = "tch")]
-    bench_backend::<phi_core::backend::tch::Tch>(c);
+    phi_core::for_each_autodiff_backend!(B => bench_backend::<B>(c));
 }
 
 criterion_group!(benches_group, benches);

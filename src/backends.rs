@@ -1,59 +1,48 @@
 //! Choosing a backend at run time: the names the command line accepts, and [`with_backend!`],
 //! which runs code generic over [`Backend`](phi_core::Backend) on the chosen one.
+//!
+//! Both are the run-time form of phi-core's list of enabled backends
+//! ([`phi_core::backend_list!`]), which the tests and benches use too: this module names no
+//! backend itself, so a backend added to that list reaches the command line unchanged.
 
 use std::fmt;
 
-/// A backend compiled into this build, by its command-line name.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum BackendKind {
-    /// ndarray + rayon: forward only, the fast CPU path.
-    #[cfg(feature = "ndarray")]
-    Ndarray,
-    /// Burn with autodiff on its CPU backend.
-    #[cfg(feature = "burn")]
-    Burn,
-    /// Burn with autodiff on a wgpu device (Vulkan, Metal, ...).
-    #[cfg(feature = "wgpu")]
-    BurnWgpu,
-    /// libtorch through tch, with its autograd.
-    #[cfg(feature = "tch")]
-    Tch,
-}
-
-impl BackendKind {
-    /// Every backend compiled into this build, the default first.
-    pub fn available() -> Vec<BackendKind> {
-        vec![
-            #[cfg(feature = "ndarray")]
-            BackendKind::Ndarray,
-            #[cfg(feature = "burn")]
-            BackendKind::Burn,
-            #[cfg(feature = "wgpu")]
-            BackendKind::BurnWgpu,
-            #[cfg(feature = "tch")]
-            BackendKind::Tch,
-        ]
-    }
-
-    /// The name the command line uses.
-    pub fn name(self) -> &'static str {
-        match self {
-            #[cfg(feature = "ndarray")]
-            BackendKind::Ndarray => "ndarray",
-            #[cfg(feature = "burn")]
-            BackendKind::Burn => "burn",
-            #[cfg(feature = "wgpu")]
-            BackendKind::BurnWgpu => "burn-wgpu",
-            #[cfg(feature = "tch")]
-            BackendKind::Tch => "tch",
+/// Defines [`BackendKind`] from the records of [`phi_core::backend_list!`].
+macro_rules! backend_kind {
+    (() $({
+        $module:ident, $variant:ident, $name:literal, $backend:ty, $autodiff:tt, $host:tt,
+        $doc:literal
+    })*) => {
+        /// A backend compiled into this build, by its command-line name.
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+        pub enum BackendKind {
+            $(#[doc = $doc] $variant,)*
         }
-    }
 
-    /// Whether the backend computes gradients.
-    pub fn has_autodiff(self) -> bool {
-        self.name() != "ndarray"
-    }
+        impl BackendKind {
+            /// Every backend compiled into this build, the default first.
+            pub fn available() -> Vec<BackendKind> {
+                vec![$(BackendKind::$variant),*]
+            }
+
+            /// The name the command line uses.
+            pub fn name(self) -> &'static str {
+                match self {
+                    $(BackendKind::$variant => $name,)*
+                }
+            }
+
+            /// Whether the backend computes gradients.
+            pub fn has_autodiff(self) -> bool {
+                match self {
+                    $(BackendKind::$variant => $autodiff,)*
+                }
+            }
+        }
+    };
 }
+
+phi_core::backend_list!(backend_kind!());
 
 impl fmt::Display for BackendKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -95,28 +84,7 @@ impl std::str::FromStr for BackendKind {
 #[macro_export]
 macro_rules! with_backend {
     ($kind:expr, $B:ident => $body:expr) => {
-        match $kind {
-            #[cfg(feature = "ndarray")]
-            $crate::backends::BackendKind::Ndarray => {
-                type $B = $crate::phi_core::backend::ndarray::NdArray;
-                $body
-            }
-            #[cfg(feature = "burn")]
-            $crate::backends::BackendKind::Burn => {
-                type $B = $crate::phi_core::backend::burn::Burn;
-                $body
-            }
-            #[cfg(feature = "wgpu")]
-            $crate::backends::BackendKind::BurnWgpu => {
-                type $B = $crate::phi_core::backend::burn::BurnWgpu;
-                $body
-            }
-            #[cfg(feature = "tch")]
-            $crate::backends::BackendKind::Tch => {
-                type $B = $crate::phi_core::backend::tch::Tch;
-                $body
-            }
-        }
+        $crate::phi_core::backend_list!($crate::__with_backend_arms!($kind, $B, $body))
     };
 }
 
@@ -124,24 +92,68 @@ macro_rules! with_backend {
 #[macro_export]
 macro_rules! with_autodiff_backend {
     ($kind:expr, $B:ident => $body:expr, otherwise => $otherwise:expr) => {
+        $crate::phi_core::backend_list!($crate::__with_autodiff_backend_arms!(
+            $kind, $B, $body, $otherwise
+        ))
+    };
+}
+
+/// The `match` of [`with_backend!`]: one arm per record of [`phi_core::backend_list!`].
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __with_backend_arms {
+    (($kind:expr, $B:ident, $body:expr) $({
+        $module:ident, $variant:ident, $name:literal, $backend:ty, $autodiff:tt, $host:tt,
+        $doc:literal
+    })*) => {
         match $kind {
-            #[cfg(feature = "burn")]
-            $crate::backends::BackendKind::Burn => {
-                type $B = $crate::phi_core::backend::burn::Burn;
+            $($crate::backends::BackendKind::$variant => {
+                type $B = $backend;
                 $body
-            }
-            #[cfg(feature = "wgpu")]
-            $crate::backends::BackendKind::BurnWgpu => {
-                type $B = $crate::phi_core::backend::burn::BurnWgpu;
-                $body
-            }
-            #[cfg(feature = "tch")]
-            $crate::backends::BackendKind::Tch => {
-                type $B = $crate::phi_core::backend::tch::Tch;
-                $body
-            }
-            #[allow(unreachable_patterns)]
-            _ => $otherwise,
+            })*
         }
     };
+}
+
+/// The `match` of [`with_autodiff_backend!`]: `$body` for the records with autodiff,
+/// `$otherwise` for the others.
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __with_autodiff_backend_arms {
+    (($kind:expr, $B:ident, $body:expr, $otherwise:expr) $({
+        $module:ident, $variant:ident, $name:literal, $backend:ty, $autodiff:tt, $host:tt,
+        $doc:literal
+    })*) => {
+        match $kind {
+            $($crate::backends::BackendKind::$variant => $crate::phi_core::__phi_if! { $autodiff {{
+                type $B = $backend;
+                $body
+            }} else { $otherwise } },)*
+        }
+    };
+}
+
+#[cfg(test)]
+mod tests {
+    use phi_core::Backend;
+
+    use super::BackendKind;
+
+    #[test]
+    fn every_kind_dispatches_to_the_backend_of_its_name() {
+        let kinds = BackendKind::available();
+        assert_eq!(kinds[0].name(), "ndarray", "the default comes first");
+        for kind in kinds {
+            assert_eq!(crate::with_backend!(kind, B => B::name()), kind.name());
+            let autodiff =
+                crate::with_autodiff_backend!(kind, B => Some(B::name()), otherwise => None);
+            assert_eq!(autodiff.is_some(), kind.has_autodiff(), "{kind}");
+            assert_eq!(kind.name().parse::<BackendKind>().unwrap(), kind);
+        }
+        let unknown = "numpy".parse::<BackendKind>().unwrap_err().to_string();
+        assert!(
+            unknown.contains("`numpy`") && unknown.contains("ndarray"),
+            "{unknown}"
+        );
+    }
 }

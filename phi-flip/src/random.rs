@@ -37,7 +37,7 @@
 //! choice keeps its probability exactly; the *sizes* are the ones conditioned on the limit (pools
 //! higher than 4 cells never fit under 1300 particles together with a block).
 
-use phi_core::backend::ndarray::NdArray;
+use phi_core::backend::Host;
 use phi_core::fields::{Boundary, Domain};
 use phi_geom::{Geometry, Obstacle, Rotation};
 use rand::rngs::StdRng;
@@ -388,12 +388,12 @@ impl RandomScene {
         self.liquid_count() + self.obstacle_count()
     }
 
-    /// The scene's simulation (thesis parameters, time step `dt`) on the ndarray backend, and its
-    /// liquid at frame 0.
+    /// The scene's simulation (thesis parameters, time step `dt`) on the host backend ([`Host`]:
+    /// ndarray), and its liquid at frame 0.
     ///
     /// # Errors
     /// Invalid `dt`.
-    pub fn simulation(&self, dt: f32) -> Result<(FlipSimulation<NdArray>, Particles<NdArray>)> {
+    pub fn simulation(&self, dt: f32) -> Result<(FlipSimulation<Host>, Particles<Host>)> {
         let device = Default::default();
         let simulation = FlipSimulation::new(
             self.domain.clone(),
@@ -593,8 +593,8 @@ impl ParticleTrajectory {
 /// # Errors
 /// A failing step, or an inflow that changed the particle count.
 pub fn record_trajectory(
-    simulation: &FlipSimulation<NdArray>,
-    particles: Particles<NdArray>,
+    simulation: &FlipSimulation<Host>,
+    particles: Particles<Host>,
     obstacle_particles: &[f32],
     steps: usize,
 ) -> Result<ParticleTrajectory> {
@@ -603,7 +603,7 @@ pub fn record_trajectory(
     let obstacle = obstacle_particles.len() / dim;
     let frame_len = (liquid + obstacle) * dim;
     let mut positions = Vec::with_capacity((steps + 1) * frame_len);
-    let mut push_frame = |p: &Particles<NdArray>| -> Result<()> {
+    let mut push_frame = |p: &Particles<Host>| -> Result<()> {
         let host = p.positions.to_vec();
         if host.len() != liquid * dim {
             return Err(FlipError::InvalidParameter {
@@ -677,10 +677,10 @@ fn wall_cells(nx: usize, ny: usize, wall: usize) -> Vec<bool> {
 fn cells_inside(
     geometry: &Geometry,
     domain: &Domain,
-    device: &<NdArray as phi_core::Backend>::Device,
+    device: &<Host as phi_core::Backend>::Device,
 ) -> Result<Vec<bool>> {
     Ok(geometry
-        .cell_inside_mask::<NdArray>(domain, device)?
+        .cell_inside_mask::<Host>(domain, device)?
         .to_vec()
         .into_iter()
         .map(|v| v > 0.5)

@@ -1,6 +1,6 @@
 //! Seeding particles in the cells of a geometry.
 
-use phi_core::backend::ndarray::NdArray;
+use phi_core::backend::Host;
 use phi_core::fields::Domain;
 use phi_geom::Geometry;
 use rand::rngs::StdRng;
@@ -35,11 +35,9 @@ pub fn seed_particles(
     seed: u64,
 ) -> Result<Vec<f32>> {
     let device = Default::default();
-    let inside = geometry
-        .cell_inside_mask::<NdArray>(domain, &device)?
-        .to_vec();
+    let inside = geometry.cell_inside_mask::<Host>(domain, &device)?.to_vec();
     let blocked = match excluded {
-        Some(g) => Some(g.cell_inside_mask::<NdArray>(domain, &device)?.to_vec()),
+        Some(g) => Some(g.cell_inside_mask::<Host>(domain, &device)?.to_vec()),
         None => None,
     };
     let d = domain.dim();

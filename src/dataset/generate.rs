@@ -1,7 +1,7 @@
 //! `phi dataset generate`: simulates the trajectories of a dataset in parallel.
 //!
 //! Trajectories are independent jobs on a rayon pool (`--threads`); each simulation runs on one
-//! thread on the ndarray backend. Trajectory `i` of a split is drawn from
+//! thread on the host backend (`phi_core::backend::Host`: ndarray). Trajectory `i` of a split is drawn from
 //! [`trajectory_seed`]`(split seed, i)`, so the bytes of every file are the same whatever the
 //! thread count, sharding (`--shard k/n` takes the indices `i ≡ k mod n`) or order of
 //! completion. Files are written atomically (temporary file, then rename): a killed run loses

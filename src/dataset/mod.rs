@@ -20,7 +20,7 @@ pub mod stats;
 use std::path::Path;
 
 use anyhow::{Context, Result, bail};
-use phi_core::backend::ndarray::NdArray;
+use phi_core::backend::Host;
 use phi_flip::{
     ParticleTrajectory, RandomSceneParams, Scene, SceneVariant, cell_centres,
     generate_random_scene, record_trajectory,
@@ -145,7 +145,7 @@ pub struct RawTrajectory {
 
 /// Simulates trajectory `index` of `split`: a random scene drawn from `seed` (train, valid) or
 /// test scene `index`; `steps` overrides the step count of test scenes. Runs on the calling
-/// thread (ndarray backend; the 32×32 kernels stay below its parallel threshold).
+/// thread ([`Host`], the ndarray backend; the 32×32 kernels stay below its parallel threshold).
 ///
 /// # Errors
 /// A scene that cannot be drawn or built, a failing simulation step.
@@ -171,7 +171,7 @@ pub fn simulate_trajectory(
                 .with_context(|| format!("there are {} test scenes", TEST_SCENES.len()))?;
             let scene = test_scene(index, variant)?;
             let origin = format!("scenes/test/{name}");
-            let setup = scene.build::<NdArray>(&origin, &Default::default())?;
+            let setup = scene.build::<Host>(&origin, &Default::default())?;
             let ny = scene.domain.resolution[1];
             let obstacle_particles = cell_centres(&setup.simulation.solid_cells(0.0)?, ny);
             let trajectory = record_trajectory(

@@ -6,9 +6,9 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use phi_core::backend::{PadMode, ReduceOp};
 use phi_core::{Backend, IntTensor, Tensor, TensorError};
 
-use super::{assert_tensor, for_each_backend, tensor};
+use super::{assert_tensor, tensor};
 
-for_each_backend!(
+phi_core::backend_tests!(
     broadcasting_corners,
     empty_tensors,
     out_of_range_indices,

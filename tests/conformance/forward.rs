@@ -5,12 +5,9 @@ use phi_core::backend::{BinaryOp, CompareOp, IntBinaryOp, PadMode, ReduceOp, Una
 use phi_core::{Backend, IntTensor, Tensor};
 
 use super::cases::Case;
-use super::{
-    Reference, assert_matches_reference, assert_tensor, assert_values, for_each_backend, tensor,
-    values,
-};
+use super::{Reference, assert_matches_reference, assert_tensor, assert_values, tensor, values};
 
-for_each_backend!(
+phi_core::backend_tests!(
     unary_ops,
     binary_ops,
     scalar_ops,

@@ -10,9 +10,9 @@
 use phi_core::{AutodiffBackend, Tensor, TensorError};
 
 use super::cases::Case;
-use super::{assert_values, for_each_autodiff_backend, tensor, values};
+use super::{assert_values, tensor, values};
 
-for_each_autodiff_backend!(
+phi_core::autodiff_backend_tests!(
     unary_gradients,
     binary_gradients,
     reduction_gradients,

@@ -1,8 +1,8 @@
 //! Cross-backend conformance: every operation of the `Backend` trait, written once and run on
 //! every enabled backend.
 //!
-//! Each test is a generic function `fn name<B: Backend>()`; [`for_each_backend!`] writes one
-//! `#[test]` per enabled backend for it (`conformance::forward::burn::unary_ops`, ...), so the
+//! Each test is a generic function `fn name<B: Backend>()`; [`phi_core::backend_tests!`] writes
+//! one `#[test]` per enabled backend for it (`conformance::forward::burn::unary_ops`, ...), so the
 //! test output lists how many ran on each. Values are checked three ways: against exact answers
 //! worked by hand, against the same computation on the ndarray backend (the reference, relative
 //! tolerance 1e-5), and, for autodiff backends, gradients against central finite differences and
@@ -18,40 +18,6 @@ use phi_core::{Backend, Tensor};
 
 /// The backend every other one is compared with.
 pub type Reference = NdArray;
-
-/// Writes one `#[test]` per enabled backend for each generic test function listed.
-macro_rules! for_each_backend {
-    ($($test:ident),* $(,)?) => {
-        #[cfg(feature = "ndarray")]
-        mod ndarray {
-            $(#[test] fn $test() { super::$test::<phi_core::backend::ndarray::NdArray>(); })*
-        }
-        #[cfg(feature = "burn")]
-        mod burn {
-            $(#[test] fn $test() { super::$test::<phi_core::backend::burn::Burn>(); })*
-        }
-        #[cfg(feature = "tch")]
-        mod tch {
-            $(#[test] fn $test() { super::$test::<phi_core::backend::tch::Tch>(); })*
-        }
-    };
-}
-
-/// Writes one `#[test]` per enabled backend with autodiff for each generic test function listed.
-macro_rules! for_each_autodiff_backend {
-    ($($test:ident),* $(,)?) => {
-        #[cfg(feature = "burn")]
-        mod burn {
-            $(#[test] fn $test() { super::$test::<phi_core::backend::burn::Burn>(); })*
-        }
-        #[cfg(feature = "tch")]
-        mod tch {
-            $(#[test] fn $test() { super::$test::<phi_core::backend::tch::Tch>(); })*
-        }
-    };
-}
-
-pub(crate) use {for_each_autodiff_backend, for_each_backend};
 
 /// Whether `got` is within `rtol · |want| + atol` of `want`; NaNs match NaNs and infinities
 /// match equal infinities.

@@ -17,10 +17,7 @@ use phi_core::{AutodiffBackend, Tensor};
 use super::{domain, tensor};
 use crate::conformance::{assert_values, values};
 
-crate::conformance::for_each_autodiff_backend!(
-    particle_grid_particle_gradients,
-    semi_lagrangian_gradients,
-);
+phi_core::autodiff_backend_tests!(particle_grid_particle_gradients, semi_lagrangian_gradients,);
 
 const STEP: f32 = 1e-2;
 

@@ -11,7 +11,7 @@ use phi_core::{Backend, Tensor};
 
 use super::{domain, max_error, tensor};
 
-crate::conformance::for_each_backend!(
+phi_core::backend_tests!(
     divergence_of_linear_fields,
     gradient_of_quadratic,
     laplace_converges_at_second_order,

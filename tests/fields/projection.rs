@@ -14,7 +14,7 @@ use super::gradients::{backprop, finite_differences};
 use super::{domain, for_each_index, tensor};
 use crate::conformance::{assert_values, values};
 
-crate::conformance::for_each_backend!(
+phi_core::backend_tests!(
     divergence_free_around_a_rotated_obstacle,
     pool_at_rest_is_hydrostatic,
     divergence_free_fields_are_unchanged,
@@ -23,7 +23,7 @@ crate::conformance::for_each_backend!(
 /// Gradients on the autodiff backends.
 mod gradients {
     use super::*;
-    crate::conformance::for_each_autodiff_backend!(projection_gradients);
+    phi_core::autodiff_backend_tests!(projection_gradients);
 }
 
 /// A smooth velocity that is far from divergence-free.

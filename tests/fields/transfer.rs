@@ -10,7 +10,7 @@ use phi_core::fields::{
 
 use super::{domain, for_each_index, max_error, tensor};
 
-crate::conformance::for_each_backend!(
+phi_core::backend_tests!(
     sampling_is_exact_for_linear_fields,
     particle_grid_particle_reproduces_linear_fields,
     transfer_conserves_weights,

@@ -13,13 +13,13 @@ use phi_core::{AutodiffBackend, Backend, Tensor, TensorError};
 /// Forward solves on every backend.
 mod forward {
     use super::*;
-    crate::conformance::for_each_backend!(forward_matches_the_host_solver, errors_are_values);
+    phi_core::backend_tests!(forward_matches_the_host_solver, errors_are_values);
 }
 
 /// Implicit gradients on the autodiff backends.
 mod gradients {
     use super::*;
-    crate::conformance::for_each_autodiff_backend!(
+    phi_core::autodiff_backend_tests!(
         gradient_matches_finite_differences,
         gradient_of_several_right_hand_sides,
         backward_is_one_adjoint_solve,

@@ -38,10 +38,14 @@ use crate::solve::{SolveError, SolveOptions, SolveStats, SparseMatrix};
 
 #[cfg(feature = "burn")]
 pub mod burn;
+mod enabled;
 #[cfg(feature = "ndarray")]
 pub mod ndarray;
 #[cfg(feature = "tch")]
 pub mod tch;
+
+#[cfg(any(feature = "ndarray", feature = "burn", feature = "tch"))]
+pub use enabled::Host;
 
 /// An element-wise function of one float tensor. All are differentiable (the derivative of
 /// `Floor` and `Sign` is zero, of `Abs` at 0 and `Relu` at 0 is whatever the engine picks).

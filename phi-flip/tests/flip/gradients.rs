@@ -22,19 +22,7 @@ use phi_core::{AutodiffBackend, Backend, Tensor};
 use phi_flip::{FlipParams, FlipSimulation, Inflow, Particles, SceneParameters};
 use phi_geom::{Geometry, Obstacle};
 
-macro_rules! for_each_autodiff_backend {
-    ($($test:ident),* $(,)?) => {
-        mod burn {
-            $(#[test] fn $test() { super::$test::<phi_core::backend::burn::Burn>(); })*
-        }
-        #[cfg(feature = "tch")]
-        mod tch {
-            $(#[test] fn $test() { super::$test::<phi_core::backend::tch::Tch>(); })*
-        }
-    };
-}
-
-for_each_autodiff_backend!(
+phi_core::autodiff_backend_tests!(
     gradients_of_a_falling_block_match_finite_differences,
     gradients_with_an_obstacle_match_finite_differences,
     gradients_with_an_inflow_match_finite_differences,

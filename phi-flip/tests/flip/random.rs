@@ -2,7 +2,7 @@
 //! table, obstacles keep off the liquid, draws are reproducible, and the choices are made with
 //! the table's probabilities.
 
-use phi_core::backend::ndarray::NdArray;
+use phi_core::backend::Host;
 use phi_flip::{
     RandomScene, RandomSceneParams, SceneVariant, generate_random_scene, record_trajectory,
 };
@@ -18,7 +18,7 @@ fn scenes(variant: SceneVariant) -> Vec<RandomScene> {
 
 fn cells_inside(geometry: &phi_geom::Geometry, scene: &RandomScene) -> Vec<bool> {
     geometry
-        .cell_inside_mask::<NdArray>(&scene.domain, &Default::default())
+        .cell_inside_mask::<Host>(&scene.domain, &Default::default())
         .unwrap()
         .to_vec()
         .into_iter()
