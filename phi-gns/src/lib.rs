@@ -2,5 +2,8 @@
 //!
 //! - [`data`]: the on-disk dataset format (trajectories, statistics, `metadata.json`), its
 //!   readers and writers, and conversion to and from DeepMind's TFRecord format.
+//! - [`graph`]: the radius graph of the GNS (every particle pair within the connectivity radius,
+//!   self-edges included), batched with node offsets.
 
 pub mod data;
+pub mod graph;
