@@ -1,4 +1,4 @@
-//! Integration tests of `phi_gns::data`: the one test binary of the crate, with modules by topic.
+//! Integration tests of `phi_gns::data`, the dataset format, with modules by topic.
 
 #[path = "data/common.rs"]
 mod common;
