@@ -1,5 +1,6 @@
-//! Choosing a backend at run time: the names the command line accepts, and [`with_backend!`],
-//! which runs code generic over [`Backend`](phi_core::Backend) on the chosen one.
+//! Choosing a backend at run time: the names the command line accepts, and
+//! [`with_backend!`](crate::with_backend), which runs code generic over
+//! [`Backend`](phi_core::Backend) on the chosen one.
 //!
 //! Both are the run-time form of phi-core's list of enabled backends
 //! ([`phi_core::backend_list!`]), which the tests and benches use too: this module names no
@@ -88,7 +89,8 @@ macro_rules! with_backend {
     };
 }
 
-/// Like [`with_backend!`], for backends with autodiff; `$otherwise` runs for the others.
+/// Like [`with_backend!`](crate::with_backend), for backends with autodiff; `$otherwise` runs
+/// for the others.
 #[macro_export]
 macro_rules! with_autodiff_backend {
     ($kind:expr, $B:ident => $body:expr, otherwise => $otherwise:expr) => {
@@ -98,7 +100,8 @@ macro_rules! with_autodiff_backend {
     };
 }
 
-/// The `match` of [`with_backend!`]: one arm per record of [`phi_core::backend_list!`].
+/// The `match` of [`with_backend!`](crate::with_backend): one arm per record of
+/// [`phi_core::backend_list!`].
 #[doc(hidden)]
 #[macro_export]
 macro_rules! __with_backend_arms {
@@ -115,8 +118,8 @@ macro_rules! __with_backend_arms {
     };
 }
 
-/// The `match` of [`with_autodiff_backend!`]: `$body` for the records with autodiff,
-/// `$otherwise` for the others.
+/// The `match` of [`with_autodiff_backend!`](crate::with_autodiff_backend): `$body` for the
+/// records with autodiff, `$otherwise` for the others.
 #[doc(hidden)]
 #[macro_export]
 macro_rules! __with_autodiff_backend_arms {

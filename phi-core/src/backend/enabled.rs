@@ -179,7 +179,9 @@ macro_rules! __phi_if_selected {
         $crate::__phi_if! { $host { $($tokens)* } else {} }
     };
     (autodiff, $autodiff:tt, $host:tt { $($tokens:tt)* }) => {
-        $crate::__phi_if! { $autodiff { $crate::__phi_if! { $host { $($tokens)* } else {} } } else {} }
+        $crate::__phi_if! { $autodiff {
+            $crate::__phi_if! { $host { $($tokens)* } else {} }
+        } else {} }
     };
 }
 
@@ -266,7 +268,7 @@ macro_rules! __phi_backend_test_module {
 /// ```
 /// use phi_core::Backend;
 ///
-/// let mut names = Vec::new();
+/// let mut names: Vec<&str> = Vec::new();
 /// phi_core::for_each_backend!(B => names.push(B::name()));
 /// # #[cfg(feature = "ndarray")]
 /// assert_eq!(names[0], "ndarray");
@@ -283,7 +285,7 @@ macro_rules! for_each_backend {
 /// ```
 /// use phi_core::Backend;
 ///
-/// let mut names = Vec::new();
+/// let mut names: Vec<&str> = Vec::new();
 /// phi_core::for_each_autodiff_backend!(B => names.push(B::name()));
 /// assert!(!names.contains(&"ndarray"));
 /// ```
