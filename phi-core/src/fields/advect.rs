@@ -1,31 +1,12 @@
 //! Advection: semi-Lagrangian advection of grids and explicit advection of points.
 
-use super::kernels::LatticeKernels;
+use super::kernels::{Integrator, LatticeKernels};
 use crate::error::{Result, TensorError};
 use crate::tensor::Tensor;
 
-use super::extrapolate::GridField;
 use super::grid::{CenteredGrid, StaggeredGrid, cell_centers, face_centers};
-use super::sample::{sample_centered, sample_face_component, sample_staggered, staggered_lattices};
-
-/// Semi-Lagrangian advection of a grid through `velocity` over `dt`:
-/// `f_new(x) = f(x − Δt · u(x))`, each sample traced back from its own position (cell centres,
-/// or the faces of each staggered component) with the velocity interpolated there
-/// ([`sample_staggered`]), and the old field interpolated multilinearly at the traced-back point
-/// ([`sample_centered`] / [`sample_face_component`]; points leaving the grid are clamped to its
-/// outermost samples). Exact for fields linear in space moved by a constant velocity, as long as
-/// the traced-back points stay inside the sampled region. Differentiable in the field and the
-/// velocity.
-///
-/// # Errors
-/// [`TensorError::InvalidArgument`] when the field and the velocity live on different grids.
-pub fn advect_semi_lagrangian<B: LatticeKernels, G: GridField<B>>(
-    field: &G,
-    velocity: &StaggeredGrid<B>,
-    dt: f32,
-) -> Result<G> {
-    field.advect_semi_lagrangian(velocity, dt)
-}
+use super::lattice::staggered_lattices;
+use super::sample::{sample_centered, sample_face_component, sample_staggered};
 
 pub(crate) fn advect_centered<B: LatticeKernels>(
     field: &CenteredGrid<B>,
@@ -58,15 +39,6 @@ pub(crate) fn advect_staggered<B: LatticeKernels>(
         let back = &points - &(sample_staggered(velocity, &points)? * dt);
         sample_face_component(component, domain, axis, &back)?.reshape(&shape)
     })
-}
-
-/// Time integration scheme for [`advect_points`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Integrator {
-    /// `x + Δt u(x)`.
-    Euler,
-    /// Classical fourth-order Runge-Kutta (the thesis' particle advection).
-    Rk4,
 }
 
 /// `points [N, d]` moved through the (frozen) staggered `velocity` over `dt`, the velocity

@@ -20,20 +20,24 @@
 
 mod advect;
 mod domain;
-pub(crate) mod extrapolate;
+mod extrapolate;
 mod grid;
+mod grid_field;
 pub mod kernels;
+mod lattice;
 pub mod ops;
 mod point_cloud;
 mod poisson;
 mod projection;
-pub(crate) mod sample;
+mod sample;
 
-pub use advect::{Integrator, advect_points, advect_semi_lagrangian};
+pub use advect::advect_points;
 pub use domain::{Boundary, Domain};
-pub use extrapolate::{GridField, extrapolate_valid, extrapolate_valid_tensor};
+pub use extrapolate::extrapolate_valid_tensor;
 pub use grid::{CenteredGrid, StaggeredGrid, cell_centers, face_centers};
-pub use kernels::LatticeKernels;
+pub use grid_field::{GridField, advect_semi_lagrangian, extrapolate_valid};
+pub use kernels::{Integrator, LatticeKernels};
+pub use lattice::{SampleLattice, Transfer};
 pub use ops::{
     apply_wall_boundaries, centered_to_staggered, curl, divergence, gradient, laplace,
     staggered_to_centered,
@@ -42,10 +46,9 @@ pub use point_cloud::PointCloud;
 pub use poisson::{all_faces_open, poisson_matrix};
 pub use projection::{Projection, ProjectionMasks, pressure_projection};
 pub use sample::{
-    SampleLattice, Transfer, count_particles, occupied_cells, occupied_cells_from_host,
-    particles_to_centered, particles_to_staggered, particles_to_staggered_affine, sample_centered,
-    sample_face_component, sample_face_component_gradient, sample_staggered,
-    sample_staggered_gradient, valid_faces,
+    count_particles, occupied_cells, occupied_cells_from_host, particles_to_centered,
+    particles_to_staggered, particles_to_staggered_affine, sample_centered, sample_face_component,
+    sample_face_component_gradient, sample_staggered, sample_staggered_gradient, valid_faces,
 };
 
 #[cfg(all(test, feature = "ndarray"))]

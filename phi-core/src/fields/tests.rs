@@ -176,7 +176,7 @@ fn fused_extrapolation_matches_the_composite_bit_for_bit() {
                 cells,
             )
             .unwrap();
-            let (plain_v, plain_k) = extrapolate::composite_extrapolate_valid::<NdArray>(
+            let (plain_v, plain_k) = kernels::composite_extrapolate_valid::<NdArray>(
                 v.into_primitive(),
                 k.into_primitive(),
                 spatial,
@@ -214,7 +214,7 @@ fn fused_point_advection_matches_the_composite_bit_for_bit() {
     for res in [vec![9], vec![7, 5], vec![4, 6, 5]] {
         let domain = unit(&res);
         let d = res.len();
-        let lattices = sample::staggered_lattices(&domain);
+        let lattices = lattice::staggered_lattices(&domain);
         let components: Vec<_> = lattices
             .iter()
             .map(|lattice| {
@@ -239,7 +239,7 @@ fn fused_point_advection_matches_the_composite_bit_for_bit() {
                 integrator,
             )
             .unwrap();
-            let plain = sample::composite_advect_points::<NdArray>(
+            let plain = kernels::composite_advect_points::<NdArray>(
                 &lattices,
                 &components,
                 points.primitive().clone(),
@@ -272,7 +272,7 @@ fn fused_lattice_transfers_match_the_composite_bit_for_bit() {
             .map(|k| rng.random_range(-1.0..res[k % d] as f32 + 1.0))
             .collect();
         let points = T::from_vec(points, &[n, d], &device()).unwrap();
-        for lattice in sample::staggered_lattices(&domain) {
+        for lattice in lattice::staggered_lattices(&domain) {
             let samples: usize = lattice.shape.iter().product();
             for c in [1, 3] {
                 let grid: Vec<f32> = (0..samples * c)
@@ -285,7 +285,7 @@ fn fused_lattice_transfers_match_the_composite_bit_for_bit() {
                     points.primitive().clone(),
                 )
                 .unwrap();
-                let plain = sample::composite_lattice_sample::<NdArray>(
+                let plain = lattice::composite_lattice_sample::<NdArray>(
                     &lattice,
                     grid.primitive().clone(),
                     points.primitive().clone(),
@@ -302,7 +302,7 @@ fn fused_lattice_transfers_match_the_composite_bit_for_bit() {
                         transfer,
                     )
                     .unwrap();
-                    let (plain_sums, plain_weights) = sample::composite_lattice_splat::<NdArray>(
+                    let (plain_sums, plain_weights) = lattice::composite_lattice_splat::<NdArray>(
                         &lattice,
                         points.primitive().clone(),
                         values.primitive().clone(),
@@ -317,7 +317,7 @@ fn fused_lattice_transfers_match_the_composite_bit_for_bit() {
         }
         // All components in one call (interleaved on ndarray): each column lands as the
         // composite splats it alone.
-        let lattices = sample::staggered_lattices(&domain);
+        let lattices = lattice::staggered_lattices(&domain);
         let values: Vec<f32> = (0..n * d).map(|_| rng.random_range(-3.0..3.0)).collect();
         let values = T::from_vec(values, &[n, d], &device()).unwrap();
         for transfer in [Transfer::Linear, Transfer::NearestFace] {
@@ -331,7 +331,7 @@ fn fused_lattice_transfers_match_the_composite_bit_for_bit() {
             assert_eq!(fused.len(), d);
             for (j, (lattice, (sums, weights))) in lattices.iter().zip(&fused).enumerate() {
                 let column = values.narrow(1, j..j + 1).unwrap();
-                let (plain_sums, plain_weights) = sample::composite_lattice_splat::<NdArray>(
+                let (plain_sums, plain_weights) = lattice::composite_lattice_splat::<NdArray>(
                     lattice,
                     points.primitive().clone(),
                     column.primitive().clone(),
@@ -364,7 +364,7 @@ fn fused_lattice_transfers_match_the_composite_bit_for_bit() {
         );
         assert_eq!(fused.shape(), [n, d]);
         for (j, (lattice, grid)) in lattices.iter().zip(&components).enumerate() {
-            let plain = sample::composite_lattice_sample::<NdArray>(
+            let plain = lattice::composite_lattice_sample::<NdArray>(
                 lattice,
                 grid.clone(),
                 points.primitive().clone(),

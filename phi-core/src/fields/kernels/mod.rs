@@ -13,15 +13,12 @@
 //! above phi-core add their own kernels the same way: a trait `: Backend` beside the code that
 //! calls it, with composite defaults, implemented for each backend type.
 
-use crate::backend::Backend;
+use crate::backend::{Backend, CompareOp};
 use crate::error::Result;
+use crate::tensor::Tensor;
 
-use super::advect::Integrator;
-use super::extrapolate::composite_extrapolate_valid;
-use super::sample::{
-    SampleLattice, Transfer, composite_advect_points, composite_lattice_sample,
-    composite_lattice_sample_columns, composite_lattice_splat, lattice_splat_columns_one_by_one,
-};
+use super::lattice::{SampleLattice, Transfer, composite_lattice_sample, composite_lattice_splat};
+use super::ops::{Ghost, pad_ghosts};
 
 #[cfg(feature = "ndarray")]
 mod ndarray;
@@ -130,6 +127,124 @@ pub trait LatticeKernels: Backend {
     ) -> Result<(Self::Float, Self::Float)> {
         composite_extrapolate_valid::<Self>(values, valid, spatial_dims, cells)
     }
+}
+
+/// Time integration scheme for [`advect_points`](crate::fields::advect_points).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Integrator {
+    /// `x + Δt u(x)`.
+    Euler,
+    /// Classical fourth-order Runge-Kutta (the thesis' particle advection).
+    Rk4,
+}
+
+// ---------------------------------------------------------------- composite defaults
+
+/// [`LatticeKernels::float_advect_points`] from tensor operations (the default of every backend;
+/// differentiable in the points and the velocity).
+pub(super) fn composite_advect_points<B: LatticeKernels>(
+    lattices: &[SampleLattice],
+    components: &[B::Float],
+    points: B::Float,
+    dt: f32,
+    integrator: Integrator,
+) -> Result<B::Float> {
+    let points = Tensor::<B>::from_primitive(points);
+    let velocity = |at: &Tensor<B>| -> Result<Tensor<B>> {
+        Ok(Tensor::from_primitive(B::float_lattice_sample_columns(
+            lattices,
+            components,
+            at.primitive().clone(),
+        )?))
+    };
+    let moved = match integrator {
+        Integrator::Euler => &points + &(velocity(&points)? * dt),
+        Integrator::Rk4 => {
+            let k1 = velocity(&points)?;
+            let k2 = velocity(&(&points + &(&k1 * (0.5 * dt))))?;
+            let k3 = velocity(&(&points + &(&k2 * (0.5 * dt))))?;
+            let k4 = velocity(&(&points + &(&k3 * dt)))?;
+            let slope = (k1 + k4 + (k2 + k3) * 2.0) * (dt / 6.0);
+            &points + &slope
+        }
+    };
+    Ok(moved.into_primitive())
+}
+
+/// [`LatticeKernels::float_lattice_sample_columns`] one lattice at a time through
+/// [`LatticeKernels::float_lattice_sample`], the columns joined (the default).
+pub(super) fn composite_lattice_sample_columns<B: LatticeKernels>(
+    lattices: &[SampleLattice],
+    components: &[B::Float],
+    points: B::Float,
+) -> Result<B::Float> {
+    let points = Tensor::<B>::from_primitive(points);
+    let columns = lattices
+        .iter()
+        .zip(components)
+        .map(|(lattice, values)| {
+            let column =
+                B::float_lattice_sample(lattice, values.clone(), points.primitive().clone())?;
+            Ok(Tensor::<B>::from_primitive(column))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(Tensor::concat(&columns, 1)?.into_primitive())
+}
+
+/// [`LatticeKernels::float_lattice_splat_columns`] one column at a time through
+/// [`LatticeKernels::float_lattice_splat`] (the default, and the fallback of backends that interleave
+/// only some cases).
+pub(super) fn lattice_splat_columns_one_by_one<B: LatticeKernels>(
+    lattices: &[SampleLattice],
+    points: B::Float,
+    values: B::Float,
+    transfer: Transfer,
+) -> Result<Vec<(B::Float, B::Float)>> {
+    let n = B::float_shape(&values)[0];
+    lattices
+        .iter()
+        .enumerate()
+        .map(|(j, lattice)| {
+            let column = B::float_slice(values.clone(), &[0..n, j..j + 1]);
+            B::float_lattice_splat(lattice, points.clone(), column, transfer)
+        })
+        .collect()
+}
+
+/// [`LatticeKernels::float_extrapolate_valid`] from tensor operations (the default of every backend;
+/// differentiable in `values`).
+pub(super) fn composite_extrapolate_valid<B: Backend>(
+    values: B::Float,
+    valid: B::Float,
+    spatial_dims: usize,
+    cells: usize,
+) -> Result<(B::Float, B::Float)> {
+    let mut values = Tensor::<B>::from_primitive(values);
+    let mut valid = Tensor::<B>::from_primitive(valid).compare_scalar(CompareOp::NotEqual, 0.0);
+    for _ in 0..cells {
+        let neighbour_sum = box_sum(&(&values * &valid), spatial_dims)?;
+        let neighbour_count = box_sum(&valid, spatial_dims)?;
+        let reached = neighbour_count.greater_scalar(0.0);
+        let empty = neighbour_count.compare_scalar(CompareOp::LessEqual, 0.0);
+        let mean = neighbour_sum / (&neighbour_count + &empty);
+        let newly = &reached - &(&reached * &valid);
+        values = Tensor::select(&newly, &mean, &values)?;
+        valid = reached;
+    }
+    Ok((values.into_primitive(), valid.into_primitive()))
+}
+
+/// The sum over the `3^d` box around each sample of the first `d` axes (zero beyond the edges).
+fn box_sum<B: Backend>(t: &Tensor<B>, spatial_dims: usize) -> Result<Tensor<B>> {
+    let mut sum = t.clone();
+    for axis in 0..spatial_dims {
+        let n = sum.shape()[axis];
+        let padded = pad_ghosts(&sum, axis, [Ghost::Zero, Ghost::Zero])?;
+        sum = padded.narrow(axis, 0..n)?
+            + padded.narrow(axis, 1..n + 1)?
+            + padded.narrow(axis, 2..n + 2)?;
+    }
+    Ok(sum)
 }
 
 /// Burn keeps the composite kernels: they record the autodiff graph.

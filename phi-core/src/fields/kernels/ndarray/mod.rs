@@ -5,15 +5,14 @@
 
 use std::borrow::Cow;
 
-use super::LatticeKernels;
+use super::{
+    Integrator, LatticeKernels, composite_extrapolate_valid, composite_lattice_sample_columns,
+    lattice_splat_columns_one_by_one,
+};
 use crate::backend::Backend;
 use crate::backend::ndarray::{NdArray, NdArrayDevice};
 use crate::error::Result;
-use crate::fields::advect::Integrator;
-use crate::fields::extrapolate::composite_extrapolate_valid;
-use crate::fields::sample::{
-    SampleLattice, Transfer, composite_lattice_sample_columns, lattice_splat_columns_one_by_one,
-};
+use crate::fields::lattice::{SampleLattice, Transfer};
 
 mod extrapolate;
 mod transfer;

@@ -1,8 +1,8 @@
 //! The particle ↔ grid kernels: multilinear sampling, splatting and RK4 advection of points,
 //! with the composite's index arithmetic and summation order.
 
-use crate::fields::advect::Integrator;
-use crate::fields::sample::{SampleLattice, Transfer};
+use crate::fields::kernels::Integrator;
+use crate::fields::lattice::{SampleLattice, Transfer};
 
 /// The index arithmetic of the multilinear stencil, operation for operation as the composite
 /// default in `fields::sample` does it (so the fused kernels give the same values).
