@@ -7,7 +7,8 @@ use clap::{Args, Subcommand};
 use phi_flip::{RandomSceneParams, SceneVariant};
 
 use super::Split;
-use super::generate::{GenerateOptions, Shard, generate};
+use super::generate::{GenerateOptions, generate};
+use super::manifest::Shard;
 use super::merge::merge;
 use super::render::render_trajectory;
 use super::stats::{StatsOptions, dataset_stats, format_report};

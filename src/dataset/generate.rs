@@ -20,153 +20,13 @@ use phi_gns::data::{
     LIQUID, OBSTACLE, Trajectory, TrajectoryStats, read_trajectory, trajectory_file_name,
     write_trajectory,
 };
-use phi_io::write_atomic;
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 
+use super::manifest::{
+    GeneratorConfig, MANIFEST, Manifest, Shard, read_generator, read_manifest,
+    write_dataset_metadata, write_manifest,
+};
 use super::{Split, TEST_SCENES, check_dir, position_scale, simulate_trajectory, trajectory_seed};
-
-/// The name of the generation manifest in a dataset directory.
-pub const MANIFEST: &str = "generator.json";
-
-/// `--shard k/n`: this run makes the trajectories whose index is `k` modulo `n`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Shard {
-    /// `k`, from 0.
-    pub index: usize,
-    /// `n`, at least 1.
-    pub count: usize,
-}
-
-impl Default for Shard {
-    fn default() -> Self {
-        Self { index: 0, count: 1 }
-    }
-}
-
-impl Shard {
-    /// Whether trajectory `i` belongs to this shard.
-    pub fn holds(&self, i: usize) -> bool {
-        i % self.count == self.index
-    }
-}
-
-impl std::str::FromStr for Shard {
-    type Err = String;
-
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        let bad = || format!("a shard is `k/n` with 0 <= k < n, e.g. 0/4; got {s:?}");
-        let (k, n) = s.split_once('/').ok_or_else(bad)?;
-        let (index, count) = (
-            k.trim().parse().map_err(|_| bad())?,
-            n.trim().parse().map_err(|_| bad())?,
-        );
-        if count == 0 || index >= count {
-            return Err(bad());
-        }
-        Ok(Shard { index, count })
-    }
-}
-
-impl std::fmt::Display for Shard {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}/{}", self.index, self.count)
-    }
-}
-
-/// Everything that decides the bytes of a trajectory file; two runs with equal configurations
-/// write the same files, so they may share a directory.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct GeneratorConfig {
-    /// The tool that wrote the dataset and its version.
-    pub generator: String,
-    /// `obstacles` or `walls`.
-    pub variant: SceneVariant,
-    /// The dataset seed (`--seed`).
-    pub seed: u64,
-    /// The seed of each split's stream of trajectory seeds.
-    pub split_seeds: BTreeMap<String, u64>,
-    /// Table 5.1 (steps included).
-    pub params: RandomSceneParams,
-    /// The test scenes, by file name.
-    pub test_scenes: Vec<String>,
-}
-
-impl GeneratorConfig {
-    /// The configuration of a run.
-    pub fn new(variant: SceneVariant, seed: u64, params: RandomSceneParams) -> Self {
-        Self {
-            generator: format!("phi dataset generate {}", env!("CARGO_PKG_VERSION")),
-            variant,
-            seed,
-            split_seeds: Split::ALL
-                .iter()
-                .map(|s| (s.name().to_string(), s.seed(seed)))
-                .collect(),
-            params,
-            test_scenes: TEST_SCENES.iter().map(|(n, _)| n.to_string()).collect(),
-        }
-    }
-
-    /// The configuration as JSON, its `f32` values written with their shortest decimals
-    /// (`0.05`, not `0.05000000074505806`).
-    pub fn to_json(&self) -> serde_json::Value {
-        let text = serde_json::to_string(self).expect("a configuration serialises");
-        serde_json::from_str(&text).expect("serde_json reads what it writes")
-    }
-
-    /// The keys whose values differ from `other`'s, for error messages.
-    pub fn differences(&self, other: &serde_json::Value) -> Vec<String> {
-        let mine = self.to_json();
-        let (Some(a), Some(b)) = (mine.as_object(), other.as_object()) else {
-            return vec!["(not a generator configuration)".into()];
-        };
-        let mut keys: Vec<String> = a
-            .keys()
-            .chain(b.keys())
-            .filter(|k| a.get(*k) != b.get(*k))
-            .cloned()
-            .collect();
-        keys.sort();
-        keys.dedup();
-        keys
-    }
-}
-
-/// `generator.json`: the configuration, the shard and the trajectories asked for.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Manifest {
-    /// What decides the files.
-    pub config: GeneratorConfig,
-    /// This directory's shard.
-    pub shard: Shard,
-    /// Trajectories per split asked for (all shards together).
-    pub counts: BTreeMap<String, usize>,
-}
-
-/// Reads `DIR/generator.json`, if there is one.
-///
-/// # Errors
-/// A file that cannot be read or parsed.
-pub fn read_manifest(dir: &Path) -> Result<Option<Manifest>> {
-    let path = dir.join(MANIFEST);
-    if !path.exists() {
-        return Ok(None);
-    }
-    let text =
-        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    let manifest =
-        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
-    Ok(Some(manifest))
-}
-
-fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<()> {
-    let text = serde_json::to_string_pretty(manifest)?;
-    let path = dir.join(MANIFEST);
-    write_atomic::<phi_io::IoError>(&path, |w| phi_io::write_all(w, text.as_bytes(), &path))?;
-    Ok(())
-}
 
 /// What `phi dataset generate` does.
 #[derive(Debug, Clone)]
@@ -308,7 +168,7 @@ pub fn generate(options: &GenerateOptions) -> Result<GenerateSummary> {
     })?;
     bar.finish_and_clear();
 
-    super::merge::write_dataset_metadata(out, &config, &counts, options.shard)?;
+    write_dataset_metadata(out, &config, &counts, options.shard)?;
     Ok(GenerateSummary {
         written: jobs.len(),
         skipped,
@@ -330,7 +190,7 @@ fn check_compatible(
 ) -> Result<()> {
     let stored = match read_manifest(out)? {
         Some(m) => Some((m.config.to_json(), Some(m.shard))),
-        None => super::merge::read_generator(out)?.map(|value| (value, None)),
+        None => read_generator(out)?.map(|value| (value, None)),
     };
     let hint = "choose another --out, or pass --resume to continue in it anyway (finished \
                 trajectories whose seed and length match are kept, the others remade)";

@@ -10,92 +10,10 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use phi_gns::data::{
-    METADATA_FILE, Metadata, TrajectoryStats, Variant, read_trajectory_stats, trajectory_file_name,
-    write_metadata,
-};
+use phi_gns::data::trajectory_file_name;
 
-use super::generate::{GeneratorConfig, MANIFEST, Manifest, Shard, read_manifest};
-use super::{Split, check_dir};
-use phi_flip::SceneVariant;
-
-/// The `generator` value of `DIR/metadata.json`, if the file exists.
-///
-/// # Errors
-/// A file that cannot be read or parsed as JSON.
-pub fn read_generator(dir: &Path) -> Result<Option<serde_json::Value>> {
-    let path = dir.join(METADATA_FILE);
-    if !path.exists() {
-        return Ok(None);
-    }
-    let text =
-        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    let value: serde_json::Value =
-        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
-    Ok(Some(value.get("generator").cloned().unwrap_or_default()))
-}
-
-/// Writes `DIR/metadata.json` for the trajectories of `counts` (an unsharded directory holds all
-/// of them). The statistics are those of the train split when it has trajectories, else of every
-/// split, merged from the files in index order. A shard (`n > 1`) writes none: its directory is
-/// not a dataset until merged.
-///
-/// # Errors
-/// A missing or unreadable trajectory file, I/O errors.
-pub fn write_dataset_metadata(
-    dir: &Path,
-    config: &GeneratorConfig,
-    counts: &BTreeMap<String, usize>,
-    shard: Shard,
-) -> Result<()> {
-    if shard.count > 1 {
-        return Ok(());
-    }
-    let params = &config.params;
-    let mut metadata = Metadata::new(2);
-    metadata.sequence_length = params.steps;
-    metadata.dt = params.dt.to_string().parse()?;
-    // In f64 from the same decimals as `position_scale` (0.8 / 32 = 0.025, offset 0.1).
-    let longest = params.resolution[0].max(params.resolution[1]) as f64;
-    let (scale, offset) = (0.8 / longest, 0.1);
-    metadata.position_scale = scale;
-    metadata.position_offset = offset;
-    metadata.bounds = params
-        .resolution
-        .iter()
-        .map(|&n| [offset, n as f64 * scale + offset])
-        .collect();
-    metadata.variant = match config.variant {
-        SceneVariant::Obstacles => Variant::Obstacles,
-        SceneVariant::Walls => Variant::WallsAsParticles,
-    };
-    metadata.generator = config.to_json();
-    metadata.splits = counts.clone();
-    metadata.seeds = counts
-        .keys()
-        .filter(|s| *s != Split::Test.name())
-        .filter_map(|s| Some((s.clone(), *config.split_seeds.get(s)?)))
-        .collect();
-    let train = counts.get(Split::Train.name()).copied().unwrap_or(0);
-    let mut stats = TrajectoryStats::new(2);
-    for (split, &count) in counts {
-        if train > 0 && split != Split::Train.name() {
-            continue;
-        }
-        for index in 0..count {
-            let path = dir.join(split).join(trajectory_file_name(index));
-            let one = read_trajectory_stats(&path)?;
-            stats
-                .merge(&one)
-                .with_context(|| format!("merging the statistics of {}", path.display()))?;
-        }
-    }
-    if stats.velocity.count() > 0 {
-        metadata.set_statistics(&stats)?;
-    }
-    write_metadata(dir, &metadata)?;
-    Ok(())
-}
+use super::check_dir;
+use super::manifest::{MANIFEST, Manifest, Shard, read_manifest, write_dataset_metadata};
 
 /// What a merge did.
 #[derive(Debug, Clone, Default)]

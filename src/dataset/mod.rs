@@ -13,6 +13,7 @@
 
 pub mod cli;
 pub mod generate;
+pub mod manifest;
 pub mod merge;
 pub mod render;
 pub mod stats;
