@@ -16,27 +16,9 @@ pub fn temp_dir(test: &str) -> PathBuf {
     dir
 }
 
-/// A small deterministic generator (SplitMix64), so the tests need no dependency.
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Rng(seed)
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[0, 1)`.
-    pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
+#[path = "../shared/rng.rs"]
+mod rng;
+pub use rng::Rng;
 
 /// A trajectory of `liquid` falling, jittering liquid particles followed by `obstacles` static
 /// ones, `frames` frames in `dim` dimensions, positions inside `[0.1, 0.9]`.

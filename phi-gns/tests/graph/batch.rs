@@ -3,14 +3,14 @@
 use phi_core::backend::Backend;
 use phi_gns::graph::{ExamplePositions, RadiusGraph};
 
-use crate::common::{Rng, pairs};
+use crate::common::{Rng, pairs, points};
 
 #[test]
 fn a_batch_is_its_examples_side_by_side_with_node_offsets() {
     let mut rng = Rng::new(5);
     for dim in [2, 3] {
-        let first = rng.points(120, dim, 0.0, 1.0);
-        let second = rng.points(80, dim, -0.5, 0.5);
+        let first = points(&mut rng, 120, dim, 0.0, 1.0);
+        let second = points(&mut rng, 80, dim, -0.5, 0.5);
         let radius = 0.2;
         let batch = RadiusGraph::for_batch(
             &[
@@ -41,9 +41,9 @@ fn a_batch_is_its_examples_side_by_side_with_node_offsets() {
 #[test]
 fn the_edges_do_not_depend_on_the_thread_count() {
     let mut rng = Rng::new(17);
-    let big = rng.points(6000, 3, 0.0, 1.0);
-    let small = rng.points(700, 2, 0.0, 1.0);
-    let small_too = rng.points(300, 2, 0.0, 1.0);
+    let big = points(&mut rng, 6000, 3, 0.0, 1.0);
+    let small = points(&mut rng, 700, 2, 0.0, 1.0);
+    let small_too = points(&mut rng, 300, 2, 0.0, 1.0);
     let build = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -75,7 +75,7 @@ fn the_edges_do_not_depend_on_the_thread_count() {
 
 fn assert_tensors_hold_the_edges<B: Backend>() {
     let mut rng = Rng::new(19);
-    let positions = rng.points(60, 2, 0.0, 1.0);
+    let positions = points(&mut rng, 60, 2, 0.0, 1.0);
     let graph = RadiusGraph::for_positions(&positions, 2, 0.2).unwrap();
     let (senders, receivers) = graph.to_tensors::<B>(&B::default_device()).unwrap();
     assert_eq!(senders.shape(), [graph.edges()]);

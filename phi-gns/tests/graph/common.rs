@@ -2,33 +2,15 @@
 
 use phi_gns::graph::RadiusGraph;
 
-/// A small deterministic generator (SplitMix64), so the tests need no dependency.
-pub struct Rng(u64);
+#[path = "../shared/rng.rs"]
+mod rng;
+pub use rng::Rng;
 
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Rng(seed)
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[0, 1)`.
-    pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    /// `n × dim` values uniform in `[low, high)`, as f32.
-    pub fn points(&mut self, n: usize, dim: usize, low: f64, high: f64) -> Vec<f32> {
-        (0..n * dim)
-            .map(|_| (low + (high - low) * self.uniform()) as f32)
-            .collect()
-    }
+/// `n × dim` values uniform in `[low, high)` drawn from `rng`, as f32.
+pub fn points(rng: &mut Rng, n: usize, dim: usize, low: f64, high: f64) -> Vec<f32> {
+    (0..n * dim)
+        .map(|_| (low + (high - low) * rng.uniform()) as f32)
+        .collect()
 }
 
 /// Every `(receiver, sender)` pair within `radius` (inclusive, distance in f64 as documented),

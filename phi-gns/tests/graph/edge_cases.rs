@@ -77,7 +77,7 @@ fn no_particles_have_no_edges() {
 #[test]
 fn every_edge_has_its_reverse_and_each_particle_its_self_edge() {
     let mut rng = crate::common::Rng::new(3);
-    let positions = rng.points(500, 3, 0.0, 1.0);
+    let positions = crate::common::points(&mut rng, 500, 3, 0.0, 1.0);
     let graph = RadiusGraph::for_positions(&positions, 3, 0.12).unwrap();
     let edges: std::collections::HashSet<(i64, i64)> = pairs(&graph).into_iter().collect();
     assert!(edges.iter().all(|&(r, s)| edges.contains(&(s, r))));
