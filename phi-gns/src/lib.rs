@@ -4,6 +4,9 @@
 //!   readers and writers, and conversion to and from DeepMind's TFRecord format.
 //! - [`graph`]: the radius graph of the GNS (every particle pair within the connectivity radius,
 //!   self-edges included), batched with node offsets.
+//! - [`model`]: the network (features, encode-process-decode, integration), its parameters and
+//!   its model files, generic over the backend through [`model::GnsKernels`].
 
 pub mod data;
 pub mod graph;
+pub mod model;

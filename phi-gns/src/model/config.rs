@@ -1,0 +1,375 @@
+//! The configuration of a GNS and the dataset facts it was built for: the content of
+//! `model.json`.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::ModelError;
+use crate::data::{Metadata, OBSTACLE};
+
+/// The value of [`ModelSpec::format`].
+pub const MODEL_FORMAT: &str = "phi-gns-model";
+/// The value of [`ModelSpec::format_version`] this code reads and writes.
+pub const MODEL_FORMAT_VERSION: u32 = 1;
+
+/// The sizes and options of a GNS (Sanchez-Gonzalez et al. 2020; thesis section 5.1). Every key
+/// is required in `model.json`; unknown keys are errors.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GnsConfig {
+    /// Spatial dimensions of the positions (2 or 3).
+    pub dim: usize,
+    /// `C`, the number of past velocities in a node's features (5); the model reads the last
+    /// `C + 1` positions.
+    pub input_velocities: usize,
+    /// `R`, the connectivity radius of the radius graph, in stored position units (0.03).
+    pub connectivity_radius: f64,
+    /// Width of the node and edge latents (128).
+    pub latent_size: usize,
+    /// Width of the hidden layers of every MLP (128).
+    pub hidden_size: usize,
+    /// Hidden layers per MLP (2): an MLP has `hidden_layers + 1` dense layers.
+    pub hidden_layers: usize,
+    /// `M`, the number of unshared interaction-network steps of the processor (10).
+    pub message_passing_steps: usize,
+    /// Rows of the particle-type embedding: the number of particle types (2: obstacle, liquid).
+    pub particle_types: usize,
+    /// Width of the particle-type embedding (16); used only when `particle_types > 1`.
+    pub embedding_size: usize,
+    /// Whether nodes carry their clipped distances to the domain bounds (off for the model that
+    /// sees the walls as particles, `1snb`).
+    pub boundary_features: bool,
+    /// `σ`, the standard deviation of the training noise (0 without noise); it widens the
+    /// normalisation of velocities and accelerations as in DeepMind's code.
+    pub noise_std: f64,
+}
+
+impl GnsConfig {
+    /// The sizes of the thesis and of DeepMind's model for a `dim`-dimensional dataset with two
+    /// particle types: `C = 5`, `R = 0.03`, latent and hidden width 128, 2 hidden layers, 10
+    /// message-passing steps, an embedding of 16, boundary features, no noise.
+    pub fn thesis(dim: usize) -> Self {
+        GnsConfig {
+            dim,
+            input_velocities: 5,
+            connectivity_radius: 0.03,
+            latent_size: 128,
+            hidden_size: 128,
+            hidden_layers: 2,
+            message_passing_steps: 10,
+            particle_types: 2,
+            embedding_size: 16,
+            boundary_features: true,
+            noise_std: 0.0,
+        }
+    }
+
+    /// Whether nodes carry a particle-type embedding (more than one type).
+    pub fn uses_embedding(&self) -> bool {
+        self.particle_types > 1 && self.embedding_size > 0
+    }
+
+    /// Width of the node features: `C · dim` velocities, `2 · dim` boundary distances when
+    /// enabled, and the embedding when used (30 in 2D with the defaults).
+    pub fn node_features(&self) -> usize {
+        let boundary = if self.boundary_features {
+            2 * self.dim
+        } else {
+            0
+        };
+        let embedding = if self.uses_embedding() {
+            self.embedding_size
+        } else {
+            0
+        };
+        self.input_velocities * self.dim + boundary + embedding
+    }
+
+    /// Width of the edge features: the displacement over `R` per axis and its norm.
+    pub fn edge_features(&self) -> usize {
+        self.dim + 1
+    }
+
+    /// Checks that every size is usable; `path` names the file in the error.
+    ///
+    /// # Errors
+    /// [`ModelError::Config`] naming the key and the value.
+    pub fn validate(&self, path: &Path) -> Result<(), ModelError> {
+        let fail = |key: &str, reason: String| {
+            Err(ModelError::Config {
+                path: path.to_path_buf(),
+                key: format!("config.{key}"),
+                reason,
+            })
+        };
+        if self.dim != 2 && self.dim != 3 {
+            return fail("dim", format!("{} is not 2 or 3", self.dim));
+        }
+        if self.input_velocities == 0 {
+            return fail("input_velocities", "must be at least 1".into());
+        }
+        if !(self.connectivity_radius.is_finite() && self.connectivity_radius > 0.0) {
+            return fail(
+                "connectivity_radius",
+                format!("{} is not a positive number", self.connectivity_radius),
+            );
+        }
+        for (key, value) in [
+            ("latent_size", self.latent_size),
+            ("hidden_size", self.hidden_size),
+            ("particle_types", self.particle_types),
+        ] {
+            if value == 0 {
+                return fail(key, "must be at least 1".into());
+            }
+        }
+        // A generous ceiling that still keeps a mistyped size from allocating terabytes.
+        for (key, value) in [
+            ("latent_size", self.latent_size),
+            ("hidden_size", self.hidden_size),
+            ("hidden_layers", self.hidden_layers),
+            ("message_passing_steps", self.message_passing_steps),
+            ("embedding_size", self.embedding_size),
+            ("input_velocities", self.input_velocities),
+            ("particle_types", self.particle_types),
+        ] {
+            if value > 4096 {
+                return fail(key, format!("{value} is larger than 4096"));
+            }
+        }
+        if !(self.noise_std.is_finite() && self.noise_std >= 0.0) {
+            return fail(
+                "noise_std",
+                format!("{} is not a number ≥ 0", self.noise_std),
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The statistics that normalise velocities and accelerations (in stored units per frame),
+/// copied from the training split's `metadata.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Normalisation {
+    /// Mean velocity per component.
+    pub vel_mean: Vec<f64>,
+    /// Standard deviation of the velocity per component.
+    pub vel_std: Vec<f64>,
+    /// Mean acceleration per component.
+    pub acc_mean: Vec<f64>,
+    /// Standard deviation of the acceleration per component.
+    pub acc_std: Vec<f64>,
+}
+
+impl Normalisation {
+    /// The statistics of a dataset's metadata.
+    pub fn of(metadata: &Metadata) -> Self {
+        Normalisation {
+            vel_mean: metadata.vel_mean.clone(),
+            vel_std: metadata.vel_std.clone(),
+            acc_mean: metadata.acc_mean.clone(),
+            acc_std: metadata.acc_std.clone(),
+        }
+    }
+
+    /// `sqrt(std² + σ²)` per component: DeepMind's widened scale.
+    pub fn scale(std: &[f64], noise_std: f64) -> Vec<f64> {
+        std.iter()
+            .map(|s| (s * s + noise_std * noise_std).sqrt())
+            .collect()
+    }
+}
+
+/// `model.json`: the configuration, the normalisation and the dataset facts a model depends on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelSpec {
+    /// Always [`MODEL_FORMAT`].
+    pub format: String,
+    /// Always [`MODEL_FORMAT_VERSION`].
+    pub format_version: u32,
+    /// Sizes and options.
+    pub config: GnsConfig,
+    /// Velocity and acceleration statistics of the training data.
+    pub normalisation: Normalisation,
+    /// The domain bounds the boundary features measure from, `[min, max]` per axis.
+    pub bounds: Vec<[f64; 2]>,
+    /// The legend of particle types, as in the dataset's metadata.
+    pub particle_types: BTreeMap<String, String>,
+    /// The particle types whose positions come from the ground truth (obstacles, walls).
+    pub kinematic_types: Vec<i64>,
+    /// The seed of the initial weights.
+    pub seed: u64,
+    /// What made the weights (free-form: the training command fills it).
+    #[serde(default)]
+    pub provenance: serde_json::Value,
+}
+
+impl ModelSpec {
+    /// A model for a dataset: its dimension, bounds, statistics and particle types, with the
+    /// sizes of `config` (whose `dim` and `particle_types` are taken from the dataset).
+    pub fn for_dataset(metadata: &Metadata, mut config: GnsConfig, seed: u64) -> Self {
+        config.dim = metadata.dim;
+        config.particle_types = metadata.particle_types.len().max(1);
+        ModelSpec {
+            format: MODEL_FORMAT.to_string(),
+            format_version: MODEL_FORMAT_VERSION,
+            config,
+            normalisation: Normalisation::of(metadata),
+            bounds: metadata.bounds.clone(),
+            particle_types: metadata.particle_types.clone(),
+            kinematic_types: vec![OBSTACLE],
+            seed,
+            provenance: serde_json::Value::Null,
+        }
+    }
+
+    /// Checks the spec on its own: format, sizes, and that every per-component list has `dim`
+    /// finite entries; `path` names the file in the error.
+    ///
+    /// # Errors
+    /// [`ModelError::Config`] naming the key.
+    pub fn validate(&self, path: &Path) -> Result<(), ModelError> {
+        let fail = |key: &str, reason: String| {
+            Err(ModelError::Config {
+                path: path.to_path_buf(),
+                key: key.to_string(),
+                reason,
+            })
+        };
+        if self.format != MODEL_FORMAT {
+            return fail(
+                "format",
+                format!("'{}' is not '{MODEL_FORMAT}'", self.format),
+            );
+        }
+        if self.format_version != MODEL_FORMAT_VERSION {
+            return fail(
+                "format_version",
+                format!(
+                    "version {} is not the supported {MODEL_FORMAT_VERSION}",
+                    self.format_version
+                ),
+            );
+        }
+        self.config.validate(path)?;
+        let dim = self.config.dim;
+        let n = &self.normalisation;
+        for (key, values, positive) in [
+            ("normalisation.vel_mean", &n.vel_mean, false),
+            ("normalisation.vel_std", &n.vel_std, true),
+            ("normalisation.acc_mean", &n.acc_mean, false),
+            ("normalisation.acc_std", &n.acc_std, true),
+        ] {
+            if values.len() != dim {
+                return fail(key, format!("{} entries for a {dim}D model", values.len()));
+            }
+            if let Some(v) = values
+                .iter()
+                .find(|v| !v.is_finite() || (positive && **v < 0.0))
+            {
+                return fail(
+                    key,
+                    format!(
+                        "{v} is not a finite number{}",
+                        if positive { " ≥ 0" } else { "" }
+                    ),
+                );
+            }
+        }
+        // A zero scale would divide by zero in the features.
+        for (key, std) in [
+            ("normalisation.vel_std", &n.vel_std),
+            ("normalisation.acc_std", &n.acc_std),
+        ] {
+            if Normalisation::scale(std, self.config.noise_std)
+                .iter()
+                .any(|s| *s <= 0.0)
+            {
+                return fail(
+                    key,
+                    "a zero standard deviation (with zero noise) cannot normalise".into(),
+                );
+            }
+        }
+        if self.bounds.len() != dim {
+            return fail(
+                "bounds",
+                format!("{} axes for a {dim}D model", self.bounds.len()),
+            );
+        }
+        if let Some([lo, hi]) = self
+            .bounds
+            .iter()
+            .find(|[lo, hi]| !(lo.is_finite() && hi.is_finite() && lo < hi))
+        {
+            return fail(
+                "bounds",
+                format!("[{lo}, {hi}] is not a finite interval with min < max"),
+            );
+        }
+        if self.particle_types.len() != self.config.particle_types {
+            return fail(
+                "particle_types",
+                format!(
+                    "{} types named but config.particle_types is {}",
+                    self.particle_types.len(),
+                    self.config.particle_types
+                ),
+            );
+        }
+        for key in self.particle_types.keys() {
+            match key.parse::<usize>() {
+                Ok(t) if t < self.config.particle_types => {}
+                _ => {
+                    return fail(
+                        "particle_types",
+                        format!(
+                            "type '{key}' is not one of 0..{}",
+                            self.config.particle_types
+                        ),
+                    );
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks that a dataset fits the model: the same dimension, bounds and particle types
+    /// (the statistics may differ: a model is applied to test data with its training
+    /// statistics). `path` names the dataset's metadata in the error.
+    ///
+    /// # Errors
+    /// [`ModelError::DatasetMismatch`] naming the key and both values.
+    pub fn check_dataset(&self, metadata: &Metadata, path: &Path) -> Result<(), ModelError> {
+        let mismatch = |key: &str, model: String, dataset: String| {
+            Err(ModelError::DatasetMismatch {
+                path: path.to_path_buf(),
+                key: key.to_string(),
+                model,
+                dataset,
+            })
+        };
+        if metadata.dim != self.config.dim {
+            return mismatch("dim", self.config.dim.to_string(), metadata.dim.to_string());
+        }
+        if self.config.boundary_features && metadata.bounds != self.bounds {
+            return mismatch(
+                "bounds",
+                format!("{:?}", self.bounds),
+                format!("{:?}", metadata.bounds),
+            );
+        }
+        if metadata.particle_types != self.particle_types {
+            return mismatch(
+                "particle_types",
+                format!("{:?}", self.particle_types),
+                format!("{:?}", metadata.particle_types),
+            );
+        }
+        Ok(())
+    }
+}

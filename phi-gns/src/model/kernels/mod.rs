@@ -1,0 +1,171 @@
+//! [`GnsKernels`]: the fused kernels of the GNS, an extension of [`Backend`].
+//!
+//! A message-passing step spends its time in three places: the dense layers of the edge MLP
+//! (`[E, 128] × [128, 128]` with ~30k edges), the LayerNorm after it, and the gather of node
+//! latents onto edges and the sum of messages back onto receivers. Each is written once from the
+//! primitives of [`Backend`] (the composite defaults below, differentiable on the autodiff
+//! backends); [`NdArray`](phi_core::backend::ndarray::NdArray) fuses them (`kernels/ndarray.rs`),
+//! Burn and tch keep the defaults.
+
+use phi_core::backend::{Backend, BinaryOp, ReduceOp};
+use phi_core::error::Result;
+use phi_core::tensor::{IntTensor, Tensor};
+
+mod ndarray;
+
+/// The fused kernels of the GNS network (see the [module docs](self)). Every method has a
+/// composite default built from the [`Backend`] primitives; a backend overrides a method only with
+/// a kernel that gives the same values to float tolerance.
+pub trait GnsKernels: Backend {
+    /// A dense layer in PyTorch's convention, `y = x Wᵀ + b`, with the ReLU applied when `relu`:
+    /// `x [n, in]`, `weight [out, in]`, `bias [out]` → `[n, out]`.
+    ///
+    /// # Errors
+    /// Shape errors when the operands do not fit.
+    fn gns_linear(
+        x: Self::Float,
+        weight: Self::Float,
+        bias: Self::Float,
+        relu: bool,
+    ) -> Result<Self::Float> {
+        composite_linear::<Self>(x, weight, bias, relu)
+    }
+
+    /// LayerNorm over the last axis of `x [n, k]`: `(x − mean) / √(var + eps) · gamma + beta`,
+    /// with the biased variance (PyTorch's `nn.LayerNorm`); `gamma`, `beta` are `[k]`.
+    ///
+    /// # Errors
+    /// Shape errors when the operands do not fit.
+    fn gns_layer_norm(
+        x: Self::Float,
+        gamma: Self::Float,
+        beta: Self::Float,
+        eps: f32,
+    ) -> Result<Self::Float> {
+        composite_layer_norm::<Self>(x, gamma, beta, eps)
+    }
+
+    /// The first layer of an edge MLP on `[e, v_s, v_r]`, split so that node latents are
+    /// projected once per node: `relu(e W_eᵀ + (v W_sᵀ)[s] + (v W_rᵀ)[r] + b)`, where
+    /// `edges [E, k]`, `edge_weight` is `W_e [out, k]`, `sender_projection` and
+    /// `receiver_projection` are `v W_sᵀ` and `v W_rᵀ` (`[N, out]`), `senders` and `receivers`
+    /// are `[E]`, `bias [out]` → `[E, out]`; without the ReLU unless `relu`. Equal to the dense
+    /// layer on the concatenation.
+    ///
+    /// # Errors
+    /// Shape errors, and an index outside `0..N`.
+    #[allow(clippy::too_many_arguments)]
+    fn gns_edge_input_layer(
+        edges: Self::Float,
+        edge_weight: Self::Float,
+        bias: Self::Float,
+        sender_projection: Self::Float,
+        receiver_projection: Self::Float,
+        senders: Self::Int,
+        receivers: Self::Int,
+        relu: bool,
+    ) -> Result<Self::Float> {
+        composite_edge_input_layer::<Self>(
+            edges,
+            edge_weight,
+            bias,
+            sender_projection,
+            receiver_projection,
+            senders,
+            receivers,
+            relu,
+        )
+    }
+
+    /// The sum of edge values `[E, k]` over the incoming edges of each of `nodes` receivers:
+    /// `[nodes, k]`, zero for a node without incoming edges. `receivers [E]` is ascending (the
+    /// order of [`crate::graph::RadiusGraph`]); a kernel may rely on that.
+    ///
+    /// # Errors
+    /// Shape errors, and an index outside `0..nodes`.
+    fn gns_sum_by_receiver(
+        edges: Self::Float,
+        receivers: Self::Int,
+        nodes: usize,
+    ) -> Result<Self::Float> {
+        composite_sum_by_receiver::<Self>(edges, receivers, nodes)
+    }
+}
+
+/// [`GnsKernels::gns_linear`] from primitives.
+pub fn composite_linear<B: Backend>(
+    x: B::Float,
+    weight: B::Float,
+    bias: B::Float,
+    relu: bool,
+) -> Result<B::Float> {
+    let x = Tensor::<B>::from_primitive(x);
+    let weight = Tensor::<B>::from_primitive(weight);
+    let bias = Tensor::<B>::from_primitive(bias);
+    let y = x
+        .matmul(&weight.transpose()?)?
+        .binary(BinaryOp::Add, &bias)?;
+    Ok(if relu { y.relu() } else { y }.into_primitive())
+}
+
+/// [`GnsKernels::gns_layer_norm`] from primitives.
+pub fn composite_layer_norm<B: Backend>(
+    x: B::Float,
+    gamma: B::Float,
+    beta: B::Float,
+    eps: f32,
+) -> Result<B::Float> {
+    let x = Tensor::<B>::from_primitive(x);
+    let last = x.rank().saturating_sub(1);
+    let mean = x.reduce_axis(ReduceOp::Mean, last, true)?;
+    let centred = x.binary(BinaryOp::Sub, &mean)?;
+    let variance = centred.square().reduce_axis(ReduceOp::Mean, last, true)?;
+    let inverse = (variance + eps).sqrt().recip();
+    let normalised = centred.binary(BinaryOp::Mul, &inverse)?;
+    let scaled = normalised.binary(BinaryOp::Mul, &Tensor::<B>::from_primitive(gamma))?;
+    Ok(scaled
+        .binary(BinaryOp::Add, &Tensor::<B>::from_primitive(beta))?
+        .into_primitive())
+}
+
+/// [`GnsKernels::gns_edge_input_layer`] from primitives.
+#[allow(clippy::too_many_arguments)]
+pub fn composite_edge_input_layer<B: Backend>(
+    edges: B::Float,
+    edge_weight: B::Float,
+    bias: B::Float,
+    sender_projection: B::Float,
+    receiver_projection: B::Float,
+    senders: B::Int,
+    receivers: B::Int,
+    relu: bool,
+) -> Result<B::Float> {
+    let own = composite_linear::<B>(edges, edge_weight, bias, false)?;
+    let own = Tensor::<B>::from_primitive(own);
+    let from_senders = Tensor::<B>::from_primitive(sender_projection)
+        .gather_rows(&IntTensor::from_primitive(senders))?;
+    let from_receivers = Tensor::<B>::from_primitive(receiver_projection)
+        .gather_rows(&IntTensor::from_primitive(receivers))?;
+    let sum = own + from_senders + from_receivers;
+    Ok(if relu { sum.relu() } else { sum }.into_primitive())
+}
+
+/// [`GnsKernels::gns_sum_by_receiver`] from primitives.
+pub fn composite_sum_by_receiver<B: Backend>(
+    edges: B::Float,
+    receivers: B::Int,
+    nodes: usize,
+) -> Result<B::Float> {
+    let edges = Tensor::<B>::from_primitive(edges);
+    let mut shape = edges.shape();
+    shape[0] = nodes;
+    Ok(Tensor::<B>::zeros(&shape, &edges.device())
+        .scatter_add_rows(&IntTensor::from_primitive(receivers), &edges)?
+        .into_primitive())
+}
+
+#[cfg(feature = "burn")]
+impl<I: phi_core::backend::burn::BurnInner> GnsKernels for phi_core::backend::burn::Burn<I> {}
+
+#[cfg(feature = "tch")]
+impl GnsKernels for phi_core::backend::tch::Tch {}
