@@ -6,7 +6,10 @@
 //!   self-edges included), batched with node offsets.
 //! - [`model`]: the network (features, encode-process-decode, integration), its parameters and
 //!   its model files, generic over the backend through [`model::GnsKernels`].
+//! - [`rollout`]: a model run forward from ground-truth frames, kinematic particles following the
+//!   ground truth.
 
 pub mod data;
 pub mod graph;
 pub mod model;
+pub mod rollout;
