@@ -4,59 +4,59 @@
 
 use phi_core::tensor::{IntTensor, Tensor};
 
+use super::kernels::{Dense, EdgeInput, Norm};
 use super::{GnsKernels, ModelError, Parameters};
 
 /// Layer norm's `eps`, PyTorch's and Sonnet's default.
 pub const LAYER_NORM_EPS: f32 = 1e-5;
 
+/// The dense layers `{prefix}.{i}` for `i` in `layers`.
+fn dense_layers<B: GnsKernels>(
+    params: &Parameters<B>,
+    prefix: &str,
+    layers: std::ops::RangeInclusive<usize>,
+) -> Vec<Dense<B::Float>> {
+    layers
+        .map(|i| Dense {
+            weight: params
+                .get(&format!("{prefix}.{i}.weight"))
+                .primitive()
+                .clone(),
+            bias: params
+                .get(&format!("{prefix}.{i}.bias"))
+                .primitive()
+                .clone(),
+        })
+        .collect()
+}
+
+/// The LayerNorm `{prefix}.ln`.
+fn layer_norm<B: GnsKernels>(params: &Parameters<B>, prefix: &str) -> Norm<B::Float> {
+    Norm {
+        gamma: params
+            .get(&format!("{prefix}.ln.weight"))
+            .primitive()
+            .clone(),
+        beta: params.get(&format!("{prefix}.ln.bias")).primitive().clone(),
+    }
+}
+
 /// An MLP of `hidden_layers + 1` dense layers with ReLU between them, the dense layers named
-/// `{prefix}.{i}`, and a LayerNorm `{prefix}.ln` on the output when `layer_norm`.
+/// `{prefix}.{i}`, and a LayerNorm `{prefix}.ln` on the output when `with_norm`.
 pub(crate) fn mlp<B: GnsKernels>(
     params: &Parameters<B>,
     prefix: &str,
     hidden_layers: usize,
-    layer_norm: bool,
+    with_norm: bool,
     input: &Tensor<B>,
 ) -> Result<Tensor<B>, ModelError> {
-    mlp_from(params, prefix, hidden_layers, layer_norm, input.clone(), 0)
-}
-
-/// The dense layers `first..=hidden_layers` of an MLP applied to `x` (the output of layer
-/// `first − 1`, already through its ReLU), then the LayerNorm.
-fn mlp_from<B: GnsKernels>(
-    params: &Parameters<B>,
-    prefix: &str,
-    hidden_layers: usize,
-    layer_norm: bool,
-    mut x: Tensor<B>,
-    first: usize,
-) -> Result<Tensor<B>, ModelError> {
-    for i in first..=hidden_layers {
-        x = Tensor::from_primitive(B::gns_linear(
-            x.into_primitive(),
-            params
-                .get(&format!("{prefix}.{i}.weight"))
-                .primitive()
-                .clone(),
-            params
-                .get(&format!("{prefix}.{i}.bias"))
-                .primitive()
-                .clone(),
-            i < hidden_layers,
-        )?);
-    }
-    if layer_norm {
-        x = Tensor::from_primitive(B::gns_layer_norm(
-            x.into_primitive(),
-            params
-                .get(&format!("{prefix}.ln.weight"))
-                .primitive()
-                .clone(),
-            params.get(&format!("{prefix}.ln.bias")).primitive().clone(),
-            LAYER_NORM_EPS,
-        )?);
-    }
-    Ok(x)
+    let layers = dense_layers(params, prefix, 0..=hidden_layers);
+    let norm = with_norm.then(|| layer_norm(params, prefix));
+    Ok(Tensor::from_primitive(B::gns_mlp(
+        input.primitive().clone(),
+        &layers,
+        norm.as_ref(),
+    )?))
 }
 
 /// One interaction network `processor.{step}` (DeepMind's `InteractionNetwork` with residuals):
@@ -79,19 +79,23 @@ pub(crate) fn interaction_network<B: GnsKernels>(
     let out = weight.shape()[0];
     let block = |k: usize| weight.slice(&[0..out, k * latent..(k + 1) * latent]);
     let (edge_weight, sender_weight, receiver_weight) = (block(0)?, block(1)?, block(2)?);
-    let sender_projection = nodes.matmul(&sender_weight.transpose()?)?;
-    let receiver_projection = nodes.matmul(&receiver_weight.transpose()?)?;
-    let first = Tensor::from_primitive(B::gns_edge_input_layer(
+    let input = EdgeInput {
+        edge_weight: edge_weight.into_primitive(),
+        bias: params.get(&format!("{edge}.0.bias")).primitive().clone(),
+        sender_projection: nodes.matmul(&sender_weight.transpose()?)?.into_primitive(),
+        receiver_projection: nodes
+            .matmul(&receiver_weight.transpose()?)?
+            .into_primitive(),
+        senders: senders.primitive().clone(),
+        receivers: receivers.primitive().clone(),
+    };
+    let rest = dense_layers(params, &edge, 1..=hidden_layers);
+    let messages = Tensor::<B>::from_primitive(B::gns_edge_mlp(
         edges.primitive().clone(),
-        edge_weight.into_primitive(),
-        params.get(&format!("{edge}.0.bias")).primitive().clone(),
-        sender_projection.into_primitive(),
-        receiver_projection.into_primitive(),
-        senders.primitive().clone(),
-        receivers.primitive().clone(),
-        hidden_layers > 0,
+        &input,
+        &rest,
+        Some(&layer_norm(params, &edge)),
     )?);
-    let messages = mlp_from(params, &edge, hidden_layers, true, first, 1)?;
     let aggregated = Tensor::from_primitive(B::gns_sum_by_receiver(
         messages.primitive().clone(),
         receivers.primitive().clone(),

@@ -11,7 +11,45 @@ use phi_core::backend::{Backend, BinaryOp, ReduceOp};
 use phi_core::error::Result;
 use phi_core::tensor::{IntTensor, Tensor};
 
+use super::network::LAYER_NORM_EPS;
+
 mod ndarray;
+
+/// A dense layer's parameters in PyTorch's convention: `weight [out, in]`, `bias [out]`.
+#[derive(Debug, Clone)]
+pub struct Dense<F> {
+    /// `W [out, in]`.
+    pub weight: F,
+    /// `b [out]`.
+    pub bias: F,
+}
+
+/// A LayerNorm's scale and shift, each `[k]`.
+#[derive(Debug, Clone)]
+pub struct Norm<F> {
+    /// The scale `γ`.
+    pub gamma: F,
+    /// The shift `β`.
+    pub beta: F,
+}
+
+/// The split first layer of an edge MLP on `[e, v_s, v_r]` (see
+/// [`GnsKernels::gns_edge_input_layer`]).
+#[derive(Debug, Clone)]
+pub struct EdgeInput<F, I> {
+    /// `W_e [out, k]`, the columns of the layer's weight that multiply `e`.
+    pub edge_weight: F,
+    /// `b [out]`.
+    pub bias: F,
+    /// `v W_sᵀ [N, out]`.
+    pub sender_projection: F,
+    /// `v W_rᵀ [N, out]`.
+    pub receiver_projection: F,
+    /// `[E]`.
+    pub senders: I,
+    /// `[E]`, ascending.
+    pub receivers: I,
+}
 
 /// The fused kernels of the GNS network (see the [module docs](self)). Every method has a
 /// composite default built from the [`Backend`] primitives; a backend overrides a method only with
@@ -77,6 +115,35 @@ pub trait GnsKernels: Backend {
         )
     }
 
+    /// An MLP: the dense `layers` with a ReLU between consecutive ones (none after the last),
+    /// then the LayerNorm `norm` (with [`LAYER_NORM_EPS`](crate::model::network::LAYER_NORM_EPS))
+    /// if given. `x [n, in]` → `[n, out]`.
+    ///
+    /// # Errors
+    /// Shape errors when the operands do not fit.
+    fn gns_mlp(
+        x: Self::Float,
+        layers: &[Dense<Self::Float>],
+        norm: Option<&Norm<Self::Float>>,
+    ) -> Result<Self::Float> {
+        composite_mlp::<Self>(x, layers, norm)
+    }
+
+    /// An edge MLP whose first layer is `input` (split, see
+    /// [`GnsKernels::gns_edge_input_layer`]), followed by the dense `rest` (ReLU between layers,
+    /// none after the last) and the LayerNorm `norm` if given. `edges [E, k]` → `[E, out]`.
+    ///
+    /// # Errors
+    /// Shape errors, and an index outside `0..N`.
+    fn gns_edge_mlp(
+        edges: Self::Float,
+        input: &EdgeInput<Self::Float, Self::Int>,
+        rest: &[Dense<Self::Float>],
+        norm: Option<&Norm<Self::Float>>,
+    ) -> Result<Self::Float> {
+        composite_edge_mlp::<Self>(edges, input, rest, norm)
+    }
+
     /// The sum of edge values `[E, k]` over the incoming edges of each of `nodes` receivers:
     /// `[nodes, k]`, zero for a node without incoming edges. `receivers [E]` is ascending (the
     /// order of [`crate::graph::RadiusGraph`]); a kernel may rely on that.
@@ -89,6 +156,50 @@ pub trait GnsKernels: Backend {
         nodes: usize,
     ) -> Result<Self::Float> {
         composite_sum_by_receiver::<Self>(edges, receivers, nodes)
+    }
+}
+
+/// [`GnsKernels::gns_mlp`] from the per-layer kernels.
+pub fn composite_mlp<B: GnsKernels>(
+    mut x: B::Float,
+    layers: &[Dense<B::Float>],
+    norm: Option<&Norm<B::Float>>,
+) -> Result<B::Float> {
+    for (i, layer) in layers.iter().enumerate() {
+        let relu = i + 1 < layers.len();
+        x = B::gns_linear(x, layer.weight.clone(), layer.bias.clone(), relu)?;
+    }
+    match norm {
+        Some(n) => B::gns_layer_norm(x, n.gamma.clone(), n.beta.clone(), LAYER_NORM_EPS),
+        None => Ok(x),
+    }
+}
+
+/// [`GnsKernels::gns_edge_mlp`] from the per-layer kernels.
+pub fn composite_edge_mlp<B: GnsKernels>(
+    edges: B::Float,
+    input: &EdgeInput<B::Float, B::Int>,
+    rest: &[Dense<B::Float>],
+    norm: Option<&Norm<B::Float>>,
+) -> Result<B::Float> {
+    let first = B::gns_edge_input_layer(
+        edges,
+        input.edge_weight.clone(),
+        input.bias.clone(),
+        input.sender_projection.clone(),
+        input.receiver_projection.clone(),
+        input.senders.clone(),
+        input.receivers.clone(),
+        !rest.is_empty(),
+    )?;
+    let mut x = first;
+    for (i, layer) in rest.iter().enumerate() {
+        let relu = i + 1 < rest.len();
+        x = B::gns_linear(x, layer.weight.clone(), layer.bias.clone(), relu)?;
+    }
+    match norm {
+        Some(n) => B::gns_layer_norm(x, n.gamma.clone(), n.beta.clone(), LAYER_NORM_EPS),
+        None => Ok(x),
     }
 }
 
