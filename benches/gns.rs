@@ -1,0 +1,129 @@
+//! GNS inference per backend on a dataset frame: one step (radius graph, forward pass,
+//! integration) with the thesis's sizes (10 message-passing steps, latent and hidden 128,
+//! embedding 16) and seeded random weights, the forward pass alone, and the radius graph alone.
+//!
+//! The frame is frame 100 of training trajectory 40 of the dataset with seed 0 (1,069 particles,
+//! 1,008 of them liquid, ~27k edges at R = 0.03); the bench simulates that one trajectory first
+//! (a few seconds). Compare with geoelements/gns on the same input (docs/benchmarks.md).
+//!
+//! `cargo bench --bench gns --features tch -- --noplot`; single-threaded numbers with
+//! `RAYON_NUM_THREADS=1 OMP_NUM_THREADS=1`.
+
+mod common;
+
+use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use phi::dataset::Split;
+use phi::dataset::generate::{GenerateOptions, generate};
+use phi::dataset::manifest::Shard;
+use phi_flip::{RandomSceneParams, SceneVariant};
+use phi_gns::data::{Metadata, Trajectory, TrajectoryStats, read_trajectory, trajectory_file_name};
+use phi_gns::graph::RadiusGraph;
+use phi_gns::model::{Gns, GnsConfig, GnsKernels, GraphBatch, ModelSpec};
+
+const INDEX: usize = 40;
+const FRAME: usize = 100;
+
+/// Training trajectory [`INDEX`] of the seed-0 dataset, simulated to frame [`FRAME`].
+fn trajectory() -> Trajectory {
+    let out = std::env::temp_dir().join(format!("phi-bench-gns-{}", std::process::id()));
+    let params = RandomSceneParams {
+        steps: FRAME,
+        ..RandomSceneParams::default()
+    };
+    generate(&GenerateOptions {
+        out: out.clone(),
+        splits: vec![Split::Train],
+        count: Some(INDEX + 1),
+        seed: 0,
+        variant: SceneVariant::Obstacles,
+        params,
+        threads: None,
+        shard: Shard {
+            index: INDEX,
+            count: INDEX + 1,
+        },
+        resume: false,
+        progress: false,
+    })
+    .expect("the bench trajectory simulates");
+    let path = out.join("train").join(trajectory_file_name(INDEX));
+    let trajectory = read_trajectory(&path).expect("the bench trajectory reads back");
+    std::fs::remove_dir_all(&out).ok();
+    trajectory
+}
+
+/// The model spec: the thesis's sizes and the trajectory's own statistics.
+fn spec(trajectory: &Trajectory) -> ModelSpec {
+    let mut metadata = Metadata::new(trajectory.dim);
+    metadata
+        .set_statistics(&TrajectoryStats::of(trajectory))
+        .expect("statistics of the trajectory's dimension");
+    ModelSpec::for_dataset(&metadata, GnsConfig::thesis(trajectory.dim), 0)
+}
+
+/// The window `[N, C + 1, dim]` ending at [`FRAME`].
+fn window(trajectory: &Trajectory, c: usize) -> Vec<f32> {
+    let (n, dim) = (trajectory.particles, trajectory.dim);
+    let mut window = vec![0.0; n * (c + 1) * dim];
+    for (t, frame) in (FRAME - c..=FRAME).enumerate() {
+        let positions = trajectory.frame(frame);
+        for i in 0..n {
+            let dst = (i * (c + 1) + t) * dim;
+            window[dst..dst + dim].copy_from_slice(&positions[i * dim..(i + 1) * dim]);
+        }
+    }
+    window
+}
+
+fn bench_backend<B: GnsKernels>(c: &mut Criterion, trajectory: &Trajectory) {
+    let device = B::default_device();
+    let model = Gns::<B>::init(spec(trajectory), &device).expect("a valid spec");
+    let window = window(trajectory, model.spec().config.input_velocities);
+    let types = &trajectory.particle_type;
+    c.bench_with_input(BenchmarkId::new("gns step", B::name()), &(), |b, _| {
+        b.iter(|| {
+            let batch = GraphBatch::<B>::from_host(&window, types, model.spec(), &device)
+                .expect("a valid window");
+            common::force(&model.next_positions(&batch).expect("a forward pass"))
+        })
+    });
+    let batch =
+        GraphBatch::<B>::from_host(&window, types, model.spec(), &device).expect("a valid window");
+    c.bench_with_input(BenchmarkId::new("gns forward", B::name()), &(), |b, _| {
+        b.iter(|| {
+            common::force(
+                &model
+                    .normalised_acceleration(&batch)
+                    .expect("a forward pass"),
+            )
+        })
+    });
+}
+
+fn benches(c: &mut Criterion) {
+    let trajectory = trajectory();
+    let latest = trajectory.frame(FRAME).to_vec();
+    let liquid = trajectory.liquid_particles();
+    let edges = RadiusGraph::for_positions(&latest, trajectory.dim, 0.03)
+        .expect("finite positions")
+        .edges();
+    eprintln!(
+        "frame {FRAME} of train/{INDEX}: {} particles ({liquid} liquid), {edges} edges",
+        trajectory.particles
+    );
+    c.bench_function("radius graph", |b| {
+        b.iter(|| {
+            RadiusGraph::for_positions(&latest, trajectory.dim, 0.03)
+                .expect("finite positions")
+                .edges()
+        })
+    });
+    phi_core::for_each_backend!(B => bench_backend::<B>(c, &trajectory));
+}
+
+criterion_group! {
+    name = gns;
+    config = Criterion::default().sample_size(10).measurement_time(std::time::Duration::from_secs(5));
+    targets = benches
+}
+criterion_main!(gns);
