@@ -1,0 +1,11 @@
+//! Integration tests of `phi_gns::model`, with modules by topic. Every backend is checked
+//! against `reference.rs`, an f64 forward pass of the documented layout written on the host.
+
+#[path = "model/batching.rs"]
+mod batching;
+#[path = "model/common.rs"]
+mod common;
+#[path = "model/conformance.rs"]
+mod conformance;
+#[path = "model/reference.rs"]
+mod reference;
