@@ -7,5 +7,7 @@ mod batching;
 mod common;
 #[path = "model/conformance.rs"]
 mod conformance;
+#[path = "model/kernels.rs"]
+mod kernels;
 #[path = "model/reference.rs"]
 mod reference;
