@@ -7,6 +7,8 @@ mod batching;
 mod common;
 #[path = "model/conformance.rs"]
 mod conformance;
+#[path = "model/gradients.rs"]
+mod gradients;
 #[path = "model/kernels.rs"]
 mod kernels;
 #[path = "model/reference.rs"]

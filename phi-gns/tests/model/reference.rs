@@ -224,3 +224,14 @@ pub fn layer_norm(x: &[f64], gamma: &[f64], beta: &[f64]) -> Vec<f64> {
     }
     y
 }
+
+/// The one-step loss: `Σ_i w_i Σ_a (acc_ia − target_ia)²` with `w_i = 1 / (non-kinematic
+/// particles)` for a non-kinematic particle and 0 for a kinematic one.
+pub fn loss(acceleration: &[f64], target: &[f64], weights: &[f64], dim: usize) -> f64 {
+    acceleration
+        .chunks_exact(dim)
+        .zip(target.chunks_exact(dim))
+        .zip(weights)
+        .map(|((a, t), w)| w * a.iter().zip(t).map(|(a, t)| (a - t) * (a - t)).sum::<f64>())
+        .sum()
+}
