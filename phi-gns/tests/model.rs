@@ -7,6 +7,8 @@ mod batching;
 mod common;
 #[path = "model/conformance.rs"]
 mod conformance;
+#[path = "model/files.rs"]
+mod files;
 #[path = "model/gradients.rs"]
 mod gradients;
 #[path = "model/kernels.rs"]

@@ -2,6 +2,7 @@
 //! initial values, comparisons with a stated tolerance and temporary directories.
 
 use std::collections::BTreeMap;
+use std::path::PathBuf;
 
 use phi_core::{Backend, Tensor};
 use phi_gns::data::{LIQUID, Metadata, OBSTACLE};
@@ -10,6 +11,15 @@ use phi_gns::model::{GnsConfig, ModelSpec, Parameters};
 #[path = "../shared/rng.rs"]
 mod rng;
 pub use rng::Rng;
+
+/// A fresh, empty directory for one test.
+pub fn temp_dir(test: &str) -> PathBuf {
+    let dir =
+        std::env::temp_dir().join(format!("phi-gns-model-test-{}-{test}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("create test directory");
+    dir
+}
 
 /// The metadata of a 2D dataset with the thesis' bounds `[0.1, 0.9]`, two particle types and
 /// statistics of the size FLIP data has (velocities ~1e-3 and accelerations ~1e-4 per frame),
