@@ -1,5 +1,6 @@
 //! Integration tests of `phi_gns::model`, with modules by topic. Every backend is checked
-//! against `reference.rs`, an f64 forward pass of the documented layout written on the host.
+//! against `reference.rs`, an f64 forward pass of the documented layout written on the host,
+//! and against a PyTorch implementation through a committed fixture.
 
 #[path = "model/batching.rs"]
 mod batching;
@@ -13,5 +14,7 @@ mod files;
 mod gradients;
 #[path = "model/kernels.rs"]
 mod kernels;
+#[path = "model/pytorch.rs"]
+mod pytorch;
 #[path = "model/reference.rs"]
 mod reference;
