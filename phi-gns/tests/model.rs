@@ -1,6 +1,6 @@
-//! Integration tests of `phi_gns::model`, with modules by topic. Every backend is checked
-//! against `reference.rs`, an f64 forward pass of the documented layout written on the host,
-//! and against a PyTorch implementation through a committed fixture.
+//! Integration tests of `phi_gns::model` and `phi_gns::rollout`, with modules by topic. Every
+//! backend is checked against `reference.rs`, an f64 forward pass of the documented layout
+//! written on the host, and against a PyTorch implementation through a committed fixture.
 
 #[path = "model/batching.rs"]
 mod batching;
@@ -18,3 +18,5 @@ mod kernels;
 mod pytorch;
 #[path = "model/reference.rs"]
 mod reference;
+#[path = "model/rollout.rs"]
+mod rollout;
