@@ -41,7 +41,12 @@ impl RolloutRange {
                 ),
             });
         }
-        if self.start + self.steps >= frames {
+        // Checked: a step count near usize::MAX must be refused, not wrap around.
+        if self
+            .start
+            .checked_add(self.steps)
+            .is_none_or(|end| end >= frames)
+        {
             return Err(ModelError::Input {
                 what: "rollout steps",
                 reason: format!(

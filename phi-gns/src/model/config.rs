@@ -108,7 +108,7 @@ impl GnsConfig {
             return fail("dim", format!("{} is not 2 or 3", self.dim));
         }
         if self.input_velocities == 0 {
-            return fail("input_velocities", "must be at least 1".into());
+            return fail("input_velocities", "0 must be at least 1".into());
         }
         if !(self.connectivity_radius.is_finite() && self.connectivity_radius > 0.0) {
             return fail(
@@ -122,7 +122,7 @@ impl GnsConfig {
             ("particle_types", self.particle_types),
         ] {
             if value == 0 {
-                return fail(key, "must be at least 1".into());
+                return fail(key, format!("{value} must be at least 1"));
             }
         }
         // A generous ceiling that still keeps a mistyped size from allocating terabytes.

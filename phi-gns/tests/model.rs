@@ -1,0 +1,22 @@
+//! Integration tests of `phi_gns::model` and `phi_gns::rollout`, with modules by topic. Every
+//! backend is checked against `reference.rs`, an f64 forward pass of the documented layout
+//! written on the host, and against a PyTorch implementation through a committed fixture.
+
+#[path = "model/batching.rs"]
+mod batching;
+#[path = "model/common.rs"]
+mod common;
+#[path = "model/conformance.rs"]
+mod conformance;
+#[path = "model/files.rs"]
+mod files;
+#[path = "model/gradients.rs"]
+mod gradients;
+#[path = "model/kernels.rs"]
+mod kernels;
+#[path = "model/pytorch.rs"]
+mod pytorch;
+#[path = "model/reference.rs"]
+mod reference;
+#[path = "model/rollout.rs"]
+mod rollout;

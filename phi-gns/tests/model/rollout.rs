@@ -1,0 +1,281 @@
+//! Rollouts on small synthetic trajectories: kinematic particles follow the ground truth, the
+//! predictions feed back into the window, ranges are checked, and a rollout that produces a
+//! non-finite position stops there with the frames before it delivered.
+
+use phi_core::Tensor;
+use phi_gns::data::{LIQUID, OBSTACLE, Trajectory};
+use phi_gns::model::{Gns, GnsKernels, GraphBatch, ModelError, Parameters};
+use phi_gns::rollout::{RolloutRange, rollout, rollout_positions};
+
+use crate::common::{self, Rng, bits, perturbed};
+
+phi_core::backend_tests!(
+    kinematic_particles_follow_the_truth_and_predictions_feed_back,
+    a_nan_prediction_stops_the_rollout_at_step_one,
+    an_overflow_stops_the_rollout_at_the_step_it_happens,
+);
+
+/// `C` of the models here (the thesis' 5).
+const C: usize = 5;
+
+/// 3 obstacle particles (first, so that a particle index shows whether the kinematic ones were
+/// overwritten before the finiteness check) sliding along x, then 6 liquid particles falling,
+/// `frames` frames in 2D inside the bounds.
+fn trajectory(frames: usize) -> Trajectory {
+    let mut rng = Rng::new(5);
+    let mut start: Vec<([f64; 2], i64)> = (0..3)
+        .map(|k| ([0.3 + 0.01 * k as f64, 0.3], OBSTACLE))
+        .collect();
+    for i in 0..6 {
+        start.push((
+            [0.3 + 0.01 * (i % 3) as f64, 0.315 + 0.01 * (i / 3) as f64],
+            LIQUID,
+        ));
+    }
+    let mut position = Vec::new();
+    for t in 0..frames {
+        for (p, kind) in &start {
+            let t = t as f64;
+            let (x, y) = if *kind == OBSTACLE {
+                (p[0] + 3e-4 * t, p[1])
+            } else {
+                (
+                    p[0] + 2e-4 * t + 1e-4 * (rng.uniform() - 0.5),
+                    p[1] - 0.5e-4 * t * t,
+                )
+            };
+            position.extend([x as f32, y as f32]);
+        }
+    }
+    let types = start.iter().map(|(_, t)| *t).collect();
+    Trajectory::new(2, position, types, 0, 0).unwrap()
+}
+
+fn small_model<B: GnsKernels>() -> Gns<B> {
+    let spec = common::spec(common::config(16, 16, 2, 2), 3);
+    let params = Parameters::init(&spec.config, spec.seed, &B::default_device());
+    Gns::new(spec, perturbed(&params, 6)).unwrap()
+}
+
+/// The window `[N, C + 1, 2]` of frames `frames` (each `[N, 2]`), oldest first.
+fn window(frames: &[&[f32]], n: usize) -> Vec<f32> {
+    let mut window = Vec::new();
+    for i in 0..n {
+        for frame in frames {
+            window.extend_from_slice(&frame[2 * i..2 * i + 2]);
+        }
+    }
+    window
+}
+
+fn kinematic_particles_follow_the_truth_and_predictions_feed_back<B: GnsKernels>() {
+    let device = B::default_device();
+    let model = small_model::<B>();
+    let trajectory = trajectory(10);
+    let n = trajectory.particles;
+    let range = RolloutRange { start: C, steps: 4 };
+    let mut frames: Vec<Vec<f32>> = Vec::new();
+    rollout(&model, &trajectory, range, &device, |step, positions| {
+        assert_eq!(step, frames.len() + 1, "steps count from 1, in order");
+        assert_eq!(positions.len(), n * 2);
+        frames.push(positions.to_vec());
+        Ok(())
+    })
+    .unwrap();
+    assert_eq!(frames.len(), 4);
+    let collected = rollout_positions(&model, &trajectory, range, &device).unwrap();
+    assert_eq!(bits(&collected), bits(&frames.concat()));
+
+    for (k, frame) in frames.iter().enumerate() {
+        let truth = trajectory.frame(C + 1 + k);
+        for i in 0..n {
+            let (got, expected) = (&frame[2 * i..2 * i + 2], &truth[2 * i..2 * i + 2]);
+            if trajectory.particle_type[i] == OBSTACLE {
+                assert_eq!(bits(got), bits(expected), "step {}: obstacle {i}", k + 1);
+            } else {
+                // The untrained model does not reproduce the truth (so that the equality of
+                // the obstacles above means something).
+                assert_ne!(got, expected, "step {}: liquid particle {i}", k + 1);
+            }
+        }
+    }
+
+    // Step 1 is the model's next positions of frames 0..=C; step 2 that of frames 1..=C and
+    // the prediction of step 1 (its obstacles from the truth).
+    let next = |frames: &[&[f32]]| {
+        let batch = GraphBatch::from_host(
+            &window(frames, n),
+            &trajectory.particle_type,
+            model.spec(),
+            &device,
+        )
+        .unwrap();
+        model.next_positions(&batch).unwrap().to_vec()
+    };
+    let truth: Vec<&[f32]> = (0..=C + 1).map(|t| trajectory.frame(t)).collect();
+    let first = next(&truth[..=C]);
+    let mut second_window = truth[1..=C].to_vec();
+    second_window.push(&frames[0]);
+    let second = next(&second_window);
+    for (step, expected) in [(0, &first), (1, &second)] {
+        for i in (0..n).filter(|&i| trajectory.particle_type[i] == LIQUID) {
+            assert_eq!(
+                bits(&frames[step][2 * i..2 * i + 2]),
+                bits(&expected[2 * i..2 * i + 2]),
+                "step {}: particle {i}",
+                step + 1
+            );
+        }
+    }
+}
+
+#[test]
+fn a_range_is_checked_against_the_window_and_the_trajectory() {
+    let frames = 10;
+    // The first possible start is frame C, the last possible end the last frame.
+    assert_eq!(
+        RolloutRange::full(C, frames),
+        RolloutRange { start: C, steps: 4 }
+    );
+    RolloutRange { start: C, steps: 4 }
+        .check(C, frames)
+        .unwrap();
+    RolloutRange { start: 8, steps: 1 }
+        .check(C, frames)
+        .unwrap();
+    RolloutRange { start: 9, steps: 0 }
+        .check(C, frames)
+        .unwrap();
+
+    let error = RolloutRange { start: 4, steps: 1 }
+        .check(C, frames)
+        .unwrap_err();
+    assert!(
+        matches!(&error, ModelError::Input { what: "rollout start", reason }
+            if reason.contains("frame 4") && reason.contains("5 frames")),
+        "{error:?}"
+    );
+    let error = RolloutRange { start: C, steps: 5 }
+        .check(C, frames)
+        .unwrap_err();
+    assert!(
+        matches!(&error, ModelError::Input { what: "rollout steps", reason }
+            if reason.contains("5 steps") && reason.contains("frame 5")
+                && reason.contains("last frame 9")),
+        "{error:?}"
+    );
+    // A huge step count does not overflow.
+    RolloutRange {
+        start: C,
+        steps: usize::MAX - 2,
+    }
+    .check(C, frames)
+    .unwrap_err();
+
+    // rollout checks the range before predicting anything.
+    let model = small_model::<phi_core::backend::Host>();
+    let trajectory = trajectory(frames);
+    for range in [
+        RolloutRange { start: 4, steps: 1 },
+        RolloutRange { start: C, steps: 5 },
+    ] {
+        let mut called = false;
+        let error = rollout(&model, &trajectory, range, &Default::default(), |_, _| {
+            called = true;
+            Ok(())
+        })
+        .unwrap_err();
+        assert!(matches!(error, ModelError::Input { .. }), "{error:?}");
+        assert!(!called);
+    }
+}
+
+fn a_nan_prediction_stops_the_rollout_at_step_one<B: GnsKernels>() {
+    let device = B::default_device();
+    let model = small_model::<B>();
+    let last = format!("decoder.{}.bias", model.spec().config.hidden_layers);
+    let broken = model
+        .with_params(model.params().map(|name, t| {
+            if name == last {
+                Tensor::full(&t.shape(), f32::NAN, &t.device())
+            } else {
+                t.clone()
+            }
+        }))
+        .unwrap();
+    let trajectory = trajectory(10);
+    let mut delivered = Vec::new();
+    let range = RolloutRange { start: C, steps: 4 };
+    let error = rollout(&broken, &trajectory, range, &device, |step, _| {
+        delivered.push(step);
+        Ok(())
+    })
+    .unwrap_err();
+    // Particles 0..3 are obstacles, whose positions come from the truth: the first
+    // non-finite one is the first liquid particle.
+    assert!(
+        matches!(
+            error,
+            ModelError::NonFinitePrediction {
+                step: 1,
+                frame: 6,
+                particle: 3
+            }
+        ),
+        "{error:?}"
+    );
+    assert!(delivered.is_empty(), "{delivered:?}");
+    let message = error.to_string();
+    assert!(
+        message.contains("step 1") && message.contains("frame 6") && message.contains("particle 3")
+    );
+}
+
+fn an_overflow_stops_the_rollout_at_the_step_it_happens<B: GnsKernels>() {
+    // One liquid particle moving along x by 5e37 per frame, ending the window at 1.5e38, and
+    // two resting obstacles. With vel_std 1e38 its velocity features stay O(1) (and its
+    // boundary features clip), the network's acceleration is ~1e-4, so the predictions are
+    // 2e38, 2.5e38, 3e38 and then 3.5e38, beyond f32::MAX (3.4e38): step 4 overflows.
+    let device = B::default_device();
+    let mut metadata = common::metadata();
+    metadata.vel_std = vec![1e38, 1e38];
+    let spec = phi_gns::model::ModelSpec::for_dataset(&metadata, common::config(8, 8, 1, 1), 2);
+    let model = Gns::<B>::init(spec, &device).unwrap();
+    let frames = 12;
+    let mut position = Vec::new();
+    for t in 0..frames {
+        let x = (-1e38 + 5e37 * t.min(C) as f64) as f32;
+        position.extend([0.5, 0.5, 0.52, 0.5, x, 0.5]);
+    }
+    let trajectory = Trajectory::new(2, position, vec![OBSTACLE, OBSTACLE, LIQUID], 0, 0).unwrap();
+    let mut delivered: Vec<Vec<f32>> = Vec::new();
+    let range = RolloutRange { start: C, steps: 6 };
+    let error = rollout(&model, &trajectory, range, &device, |_, positions| {
+        delivered.push(positions.to_vec());
+        Ok(())
+    })
+    .unwrap_err();
+    assert!(
+        matches!(
+            error,
+            ModelError::NonFinitePrediction {
+                step: 4,
+                frame: 9,
+                particle: 2
+            }
+        ),
+        "{error:?}"
+    );
+    assert_eq!(delivered.len(), 3);
+    for (k, frame) in delivered.iter().enumerate() {
+        assert!(frame.iter().all(|x| x.is_finite()));
+        let expected = 1.5e38 + 5e37 * (k + 1) as f64;
+        assert!(
+            (f64::from(frame[4]) - expected).abs() < 1e-6 * expected,
+            "step {}: {}",
+            k + 1,
+            frame[4]
+        );
+        assert_eq!(&frame[..4], &[0.5, 0.5, 0.52, 0.5]);
+    }
+}
