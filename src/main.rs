@@ -66,6 +66,11 @@ enum Command {
     Render(phi::dataset::cli::RenderArgs),
     /// Optimise initial particle positions through the simulation to match a target (thesis 4.3).
     Optimize(phi::optimize::OptimizeArgs),
+    /// Make Graph Network-based Simulator model directories.
+    Model {
+        #[command(subcommand)]
+        command: phi::gns::init::ModelCommand,
+    },
 }
 
 fn main() -> Result<()> {
@@ -117,6 +122,7 @@ fn main() -> Result<()> {
         Command::Dataset { command } => phi::dataset::cli::run(command),
         Command::Render(args) => phi::dataset::cli::render(args),
         Command::Optimize(args) => phi::optimize::run(args),
+        Command::Model { command } => phi::gns::init::run(command),
     }
 }
 
