@@ -71,6 +71,9 @@ enum Command {
         #[command(subcommand)]
         command: phi::gns::init::ModelCommand,
     },
+    /// Roll a GNS out on trajectories of a dataset: predictions, truth, per-frame MSE and a GIF
+    /// of both side by side.
+    Rollout(phi::gns::rollout::RolloutArgs),
 }
 
 fn main() -> Result<()> {
@@ -123,6 +126,7 @@ fn main() -> Result<()> {
         Command::Render(args) => phi::dataset::cli::render(args),
         Command::Optimize(args) => phi::optimize::run(args),
         Command::Model { command } => phi::gns::init::run(command),
+        Command::Rollout(args) => phi::gns::rollout::run(args),
     }
 }
 

@@ -1,12 +1,18 @@
-//! `phi model ...`: model directories of Graph Network-based Simulators.
+//! `phi model ...` and `phi rollout`: model directories of Graph Network-based Simulators and
+//! their rollouts on the trajectories of a dataset (thesis section 5.4, fig. 5.8).
 //!
 //! - [`init`]: `phi model init`, a model directory (`model.json`, `model.safetensors`) with
-//!   seeded random weights for a dataset.
+//!   seeded random weights for a dataset;
+//! - [`rollout`]: `phi rollout`, a model run forward from ground-truth frames, with the
+//!   predictions, the truth, the per-frame position error and a GIF of both side by side.
 //!
-//! The files are those of [`phi_gns::model`]. A command here overwrites only files it wrote,
-//! which it recognises by a key of the JSON file it writes (see [`init::check_model_dir`]).
+//! The files are those of [`phi_gns::model`] and [`phi_gns::data`]; `docs/gns.md` describes
+//! them and the commands. Neither command overwrites files it did not write: each recognises
+//! its own outputs by a key of the JSON file it writes first (see [`init::check_model_dir`] and
+//! [`rollout::check_rollout_dir`]).
 
 pub mod init;
+pub mod rollout;
 
 use std::ffi::OsStr;
 

@@ -1,14 +1,16 @@
-//! `phi model init` end to end, on tiny datasets.
+//! `phi model init` and `phi rollout` end to end, on tiny datasets and models.
 
 use std::path::Path;
-use std::process::Output;
+use std::process::{Command, Output};
 
+use phi::output::{NpyArray, read_npz};
 use phi::phi_core::backend::ndarray::NdArray;
+use phi::phi_core::tensor::Tensor;
 use phi::phi_gns::data::{
     Dataset, LIQUID, Metadata, OBSTACLE, Trajectory, TrajectoryStats, Variant, read_metadata,
     write_metadata, write_trajectory,
 };
-use phi::phi_gns::model::{load_model, read_spec};
+use phi::phi_gns::model::{load_model, read_spec, save_model};
 
 use super::{ok, phi, scratch};
 
@@ -84,6 +86,20 @@ fn init(data: &Path, out: &Path, extra: &[&str]) -> Output {
         .unwrap()
 }
 
+fn rollout(model: &Path, data: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut command: Command = phi();
+    command
+        .arg("rollout")
+        .arg("--model")
+        .arg(model)
+        .arg("--data")
+        .arg(data)
+        .arg("--out")
+        .arg(out)
+        .args(extra);
+    command.output().unwrap()
+}
+
 /// The standard error of a run that must have failed.
 fn failed(output: Output) -> String {
     assert!(
@@ -96,6 +112,43 @@ fn failed(output: Output) -> String {
 
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+fn array(arrays: &[(String, NpyArray)], name: &str) -> NpyArray {
+    arrays
+        .iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, a)| a.clone())
+        .unwrap_or_else(|| panic!("no array '{name}'"))
+}
+
+/// The position MSE of each frame recomputed from `rollout.npz`: over the liquid particles and
+/// the dimensions.
+fn recomputed_mse(arrays: &[(String, NpyArray)]) -> Vec<f64> {
+    let (predicted, truth) = (
+        array(arrays, "predicted_position"),
+        array(arrays, "true_position"),
+    );
+    let types = array(arrays, "particle_type");
+    let types = types.as_i64().unwrap();
+    let [steps, n, dim] = predicted.shape[..] else {
+        panic!("predicted_position is not [steps, N, dim]")
+    };
+    let (p, t) = (predicted.as_f32().unwrap(), truth.as_f32().unwrap());
+    (0..steps)
+        .map(|s| {
+            let mut sum = 0.0f64;
+            let mut count = 0;
+            for i in (0..n).filter(|&i| types[i] == LIQUID) {
+                for a in 0..dim {
+                    let k = (s * n + i) * dim + a;
+                    sum += (f64::from(p[k]) - f64::from(t[k])).powi(2);
+                    count += 1;
+                }
+            }
+            sum / count as f64
+        })
+        .collect()
 }
 
 #[test]
@@ -174,5 +227,283 @@ fn model_init_writes_a_seeded_model_for_the_dataset() {
         "{stderr}"
     );
     assert_eq!(json(&model.join("model.json")), trained);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn rollout_writes_predictions_truth_mse_and_gif() {
+    let dir = scratch("rollout");
+    let data = dir.join("data");
+    ok(phi()
+        .args(["dataset", "generate", "--split", "test", "--count", "2"])
+        .args(["--steps", "30", "--out"])
+        .arg(&data)
+        .output()
+        .unwrap());
+    let model = dir.join("model");
+    ok(init(&data, &model, &[]));
+    let out = dir.join("rollouts");
+    // Test scene 1 (a narrow gap between obstacles): 8 steps from frame 5.
+    let args = [
+        "--index",
+        "1",
+        "--steps",
+        "8",
+        "--checkpoint-every",
+        "3",
+        "--frame-every",
+        "2",
+    ];
+    let stdout = ok(rollout(&model, &data, &out, &args));
+    let folder = out.join("test_1");
+    let arrays = read_npz(folder.join("rollout.npz")).unwrap();
+    let dataset = Dataset::open(&data).unwrap();
+    let (truth, _) = dataset.read_with_stats("test", 1).unwrap();
+    let (n, dim) = (truth.particles, truth.dim);
+    let predicted = array(&arrays, "predicted_position");
+    assert_eq!(predicted.shape, vec![8, n, dim]);
+    let true_position = array(&arrays, "true_position");
+    assert_eq!(true_position.shape, vec![8, n, dim]);
+    assert_eq!(
+        true_position.as_f32().unwrap(),
+        &truth.position[6 * n * dim..14 * n * dim],
+        "true_position holds frames 6..=13"
+    );
+    assert_eq!(array(&arrays, "start").as_i64().unwrap(), &[5]);
+    assert_eq!(
+        array(&arrays, "frame").as_i64().unwrap(),
+        &[6, 7, 8, 9, 10, 11, 12, 13]
+    );
+    let types = array(&arrays, "particle_type");
+    assert_eq!(types.as_i64().unwrap(), &truth.particle_type[..]);
+    let (p, t) = (predicted.as_f32().unwrap(), true_position.as_f32().unwrap());
+    assert!(p.iter().all(|x| x.is_finite()));
+    let obstacles: Vec<usize> = (0..n)
+        .filter(|&i| truth.particle_type[i] == OBSTACLE)
+        .collect();
+    assert!(!obstacles.is_empty(), "test scene 1 has obstacles");
+    for s in 0..8 {
+        for &i in &obstacles {
+            let k = (s * n + i) * dim;
+            assert_eq!(
+                &p[k..k + dim],
+                &t[k..k + dim],
+                "kinematic particle {i}, step {s}"
+            );
+        }
+    }
+    assert_ne!(p, t, "an untrained model predicts the truth");
+
+    let record = json(&folder.join("rollout.json"));
+    assert_eq!(record["complete"], true);
+    assert_eq!(record["reason"], serde_json::Value::Null);
+    assert_eq!(record["steps"], 8);
+    assert_eq!(
+        (record["start"].clone(), record["index"].clone()),
+        (5.into(), 1.into())
+    );
+    assert_eq!(record["kinematic_particles"], obstacles.len());
+    let expected = recomputed_mse(&arrays);
+    let mse: Vec<f64> = record["mse"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert_eq!(mse.len(), 8);
+    for (a, b) in mse.iter().zip(&expected) {
+        assert!((a - b).abs() <= 1e-12 * b.abs(), "MSE {a} recomputed {b}");
+    }
+    let mean = expected.iter().sum::<f64>() / 8.0;
+    let recorded_mean = record["mse_mean"].as_f64().unwrap();
+    assert!((recorded_mean - mean).abs() <= 1e-12 * mean);
+    assert!(
+        stdout.contains(&format!("mean         {mean:.6e}")),
+        "{stdout}"
+    );
+    // The compact table: the first, quartile and last steps.
+    assert!(
+        stdout.contains(&format!("      8     13  {:.6e}", expected[7])),
+        "{stdout}"
+    );
+    assert!(
+        !stdout.contains(&format!("{:.6e}", expected[2])),
+        "{stdout}"
+    );
+    // The start frame and steps 2, 4, 6, 8; the trailer closes the GIF.
+    assert_eq!(record["gif_pictures"], 5);
+    let gif = std::fs::read(folder.join("rollout.gif")).unwrap();
+    assert_eq!(&gif[..6], b"GIF89a");
+    assert_eq!(gif.last(), Some(&0x3B));
+
+    // Its own outputs are rewritten; --verbose prints every step.
+    let stdout = ok(rollout(
+        &model,
+        &data,
+        &out,
+        &["--index", "1", "--steps", "8", "--verbose"],
+    ));
+    for e in &expected {
+        assert!(stdout.contains(&format!("{e:.6e}")), "{stdout}");
+    }
+    // Another backend gives the same predictions to float tolerance.
+    let burn = dir.join("burn");
+    ok(rollout(
+        &model,
+        &data,
+        &burn,
+        &[
+            "--index",
+            "1",
+            "--steps",
+            "2",
+            "--backend",
+            "burn",
+            "--frame-every",
+            "0",
+        ],
+    ));
+    let other = read_npz(burn.join("test_1/rollout.npz")).unwrap();
+    let q = array(&other, "predicted_position");
+    assert_eq!(q.shape, vec![2, n, dim]);
+    let largest = q
+        .as_f32()
+        .unwrap()
+        .iter()
+        .zip(p)
+        .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+    assert!(largest < 1e-5, "burn and ndarray differ by {largest}");
+    assert!(!burn.join("test_1/rollout.gif").exists());
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_model_for_another_dimension_or_bounds_is_refused() {
+    let dir = scratch("rollout-mismatch");
+    let (plane, space, wide) = (dir.join("2d"), dir.join("3d"), dir.join("wide"));
+    tiny_dataset(&plane, 2, [0.1, 0.9], Variant::Obstacles);
+    tiny_dataset(&space, 3, [0.1, 0.9], Variant::Obstacles);
+    tiny_dataset(&wide, 2, [0.0, 1.0], Variant::Obstacles);
+    let (m2, m3) = (dir.join("m2"), dir.join("m3"));
+    ok(init(&plane, &m2, &[]));
+    ok(init(&space, &m3, &[]));
+    let out = dir.join("out");
+    let stderr = failed(rollout(&m3, &plane, &out, &[]));
+    assert!(
+        stderr.contains("metadata.json")
+            && stderr.contains("key 'dim'")
+            && stderr.contains("made for 3, the dataset has 2"),
+        "{stderr}"
+    );
+    let stderr = failed(rollout(&m2, &wide, &out, &[]));
+    assert!(
+        stderr.contains("key 'bounds'") && stderr.contains("[0.0, 1.0]"),
+        "{stderr}"
+    );
+    assert!(!out.exists(), "a refused rollout wrote {}", out.display());
+    // A 3D model on its own dataset rolls out (without a GIF: rendering is 2D).
+    let stdout = ok(rollout(&m3, &space, &out, &["--steps", "2"]));
+    assert!(!stdout.contains("rollout.gif"), "{stdout}");
+    assert_eq!(json(&out.join("test_0/rollout.json"))["complete"], true);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn rollout_refuses_foreign_outputs_and_missing_trajectories() {
+    let dir = scratch("rollout-refusals");
+    let data = dir.join("data");
+    tiny_dataset(&data, 2, [0.1, 0.9], Variant::Obstacles);
+    let model = dir.join("model");
+    ok(init(&data, &model, &[]));
+    let out = dir.join("out");
+    let stderr = failed(rollout(&model, &data, &out, &["--index", "2"]));
+    assert!(
+        stderr.contains("--index 2") && stderr.contains("split 'test' has 2 trajectories"),
+        "{stderr}"
+    );
+    let stderr = failed(rollout(&model, &data, &out, &["--split", "train"]));
+    assert!(stderr.contains("no split 'train'"), "{stderr}");
+    let stderr = failed(rollout(&model, &data, &out, &["--steps", "5"]));
+    assert!(
+        stderr.contains("--steps 5") && stderr.contains("frame 9"),
+        "{stderr}"
+    );
+    let stderr = failed(rollout(&model, &data, &out, &["--start", "4"]));
+    assert!(stderr.contains("--start 4"), "{stderr}");
+    assert!(!out.exists());
+
+    // Files it did not write, beside its own or in place of them, are refused and kept.
+    ok(rollout(&model, &data, &out, &["--all"]));
+    for i in 0..2 {
+        assert_eq!(
+            json(&out.join(format!("test_{i}/rollout.json")))["complete"],
+            true
+        );
+    }
+    std::fs::write(out.join("test_1/notes.txt"), "mine").unwrap();
+    let stderr = failed(rollout(&model, &data, &out, &["--all"]));
+    assert!(
+        stderr.contains("notes.txt") && stderr.contains("did not write"),
+        "{stderr}"
+    );
+    let foreign = dir.join("foreign");
+    std::fs::create_dir_all(foreign.join("test_0")).unwrap();
+    std::fs::write(foreign.join("test_0/rollout.npz"), "not ours").unwrap();
+    let stderr = failed(rollout(&model, &data, &foreign, &[]));
+    assert!(stderr.contains("did not write"), "{stderr}");
+    assert_eq!(
+        std::fs::read(foreign.join("test_0/rollout.npz")).unwrap(),
+        b"not ours"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_diverging_model_stops_with_the_frames_before() {
+    let dir = scratch("rollout-diverging");
+    let data = dir.join("data");
+    tiny_dataset(&data, 2, [0.1, 0.9], Variant::Obstacles);
+    let model = dir.join("model");
+    // Single dense layers, so that nothing between the overflow and the output is a ReLU (which
+    // may map NaN to 0, as f32::max does).
+    ok(init(&data, &model, &["--hidden-layers", "0"]));
+    // A decoder bias near the largest f32 throws the liquid ~1e35 units in the first step (still
+    // finite); the next step's velocities overflow the node encoder, whose weights are all 1e3.
+    let device = Default::default();
+    let gns = load_model::<NdArray>(&model, &device).unwrap();
+    let params = gns.params().map(|name, t| {
+        let fill = |v: f32| Tensor::from_vec(vec![v; t.numel()], &t.shape(), &device).unwrap();
+        match name {
+            "decoder.0.bias" => fill(3e38),
+            "encoder.node.0.weight" => fill(1e3),
+            _ => t.clone(),
+        }
+    });
+    save_model(&model, &gns.with_params(params).unwrap()).unwrap();
+
+    let out = dir.join("out");
+    let stderr = failed(rollout(&model, &data, &out, &["--checkpoint-every", "1"]));
+    assert!(
+        stderr.contains("rollout step 2 (frame 7)") && stderr.contains("non-finite"),
+        "{stderr}"
+    );
+    let folder = out.join("test_0");
+    let record = json(&folder.join("rollout.json"));
+    assert_eq!(record["complete"], false);
+    assert_eq!(record["failed_step"], 2);
+    assert_eq!(record["steps"], 1);
+    assert!(
+        record["reason"].as_str().unwrap().contains("step 2"),
+        "{record}"
+    );
+    let arrays = read_npz(folder.join("rollout.npz")).unwrap();
+    let predicted = array(&arrays, "predicted_position");
+    assert_eq!(predicted.shape, vec![1, 16, 2]);
+    assert!(predicted.as_f32().unwrap().iter().all(|x| x.is_finite()));
+    assert_eq!(array(&arrays, "frame").as_i64().unwrap(), &[6]);
+    assert_eq!(record["mse"].as_array().unwrap().len(), 1);
+    let gif = std::fs::read(folder.join("rollout.gif")).unwrap();
+    assert_eq!(gif.last(), Some(&0x3B), "the GIF is closed");
+    assert_eq!(record["gif_pictures"], 2);
     let _ = std::fs::remove_dir_all(dir);
 }
