@@ -9,6 +9,7 @@
 pub mod backends;
 pub mod dataset;
 pub mod demo;
+pub mod gns;
 pub mod optimize;
 pub mod output;
 pub mod simulate;

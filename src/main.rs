@@ -66,6 +66,14 @@ enum Command {
     Render(phi::dataset::cli::RenderArgs),
     /// Optimise initial particle positions through the simulation to match a target (thesis 4.3).
     Optimize(phi::optimize::OptimizeArgs),
+    /// Make Graph Network-based Simulator model directories.
+    Model {
+        #[command(subcommand)]
+        command: phi::gns::init::ModelCommand,
+    },
+    /// Roll a GNS out on trajectories of a dataset: predictions, truth, per-frame MSE and a GIF
+    /// of both side by side.
+    Rollout(phi::gns::rollout::RolloutArgs),
 }
 
 fn main() -> Result<()> {
@@ -117,6 +125,8 @@ fn main() -> Result<()> {
         Command::Dataset { command } => phi::dataset::cli::run(command),
         Command::Render(args) => phi::dataset::cli::render(args),
         Command::Optimize(args) => phi::optimize::run(args),
+        Command::Model { command } => phi::gns::init::run(command),
+        Command::Rollout(args) => phi::gns::rollout::run(args),
     }
 }
 

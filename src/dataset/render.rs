@@ -1,16 +1,95 @@
-//! `phi render`: one trajectory of a dataset as an animated GIF.
+//! `phi render`: one trajectory of a dataset as an animated GIF, and [`DatasetRenderer`], which
+//! draws a dataset's frames (the rollout GIFs of `phi rollout` use it too).
 
 use std::path::Path;
 
 use anyhow::{Context, Result, bail};
-use phi_gns::data::{Dataset, LIQUID, read_metadata, read_trajectory};
+use phi_gns::data::{Dataset, LIQUID, Metadata, read_metadata, read_trajectory};
 
-use crate::output::{FrameStyle, GifWriter, KIND_LIQUID, KIND_OBSTACLE, render_frame};
+use crate::output::{FrameStyle, GifWriter, KIND_LIQUID, KIND_OBSTACLE, RgbImage, render_frame};
+
+/// Draws frames of stored positions of a 2D dataset: positions are mapped back to cells with
+/// the metadata's `position_scale` and `position_offset`, on a grid of
+/// `(max − min) / position_scale` cells per axis of the `bounds`; obstacle particles (type 0)
+/// and liquid particles (type 1) get the renderer's two colours.
+#[derive(Debug, Clone)]
+pub struct DatasetRenderer {
+    scale: f32,
+    offset: f32,
+    resolution: Vec<usize>,
+    upper: Vec<f32>,
+    style: FrameStyle,
+}
+
+impl DatasetRenderer {
+    /// The renderer of a dataset's frames, `pixels_per_cell` pixels per cell.
+    ///
+    /// # Errors
+    /// A dataset that is not 2D.
+    pub fn new(metadata: &Metadata, pixels_per_cell: u32) -> Result<Self> {
+        if metadata.dim != 2 {
+            bail!(
+                "rendering needs a 2D dataset, this one is {}D",
+                metadata.dim
+            );
+        }
+        let resolution: Vec<usize> = metadata
+            .bounds
+            .iter()
+            .map(|[lo, hi]| ((hi - lo) / metadata.position_scale).round().max(1.0) as usize)
+            .collect();
+        let upper = resolution.iter().map(|&n| n as f32).collect();
+        Ok(DatasetRenderer {
+            scale: metadata.position_scale as f32,
+            offset: metadata.position_offset as f32,
+            resolution,
+            upper,
+            style: FrameStyle {
+                pixels_per_cell,
+                ..FrameStyle::default()
+            },
+        })
+    }
+
+    /// The renderer's particle kinds of dataset particle types.
+    pub fn kinds(particle_type: &[i64]) -> Vec<u8> {
+        particle_type
+            .iter()
+            .map(|&t| {
+                if t == LIQUID {
+                    KIND_LIQUID
+                } else {
+                    KIND_OBSTACLE
+                }
+            })
+            .collect()
+    }
+
+    /// One picture of the stored positions `frame` (`[n, 2]`) of particles of `kinds`
+    /// ([`DatasetRenderer::kinds`]).
+    ///
+    /// # Errors
+    /// Lengths that disagree, a picture too large.
+    pub fn render(&self, frame: &[f32], kinds: &[u8]) -> Result<RgbImage> {
+        let cells: Vec<f32> = frame
+            .iter()
+            .map(|x| (x - self.offset) / self.scale)
+            .collect();
+        Ok(render_frame(
+            &cells,
+            2,
+            kinds,
+            &[0.0, 0.0],
+            &self.upper,
+            &self.resolution,
+            None,
+            &self.style,
+        )?)
+    }
+}
 
 /// Renders trajectory `index` of `split` of the dataset in `dir` to the GIF `out`, one picture
-/// every `frame_every` frames; returns the number of pictures. Stored positions are mapped back
-/// to cells with the metadata's `position_scale` and `position_offset`; obstacle particles
-/// (type 0) and liquid particles (type 1) get the renderer's two colours.
+/// every `frame_every` frames; returns the number of pictures (see [`DatasetRenderer`]).
 ///
 /// # Errors
 /// A missing dataset or trajectory, I/O errors.
@@ -37,53 +116,18 @@ pub fn render_trajectory(
         );
     }
     let trajectory = read_trajectory(&Dataset::trajectory_path(dir, split, index))?;
-    let dim = trajectory.dim;
-    if dim != 2 {
-        bail!("rendering needs a 2D dataset, this one is {dim}D");
+    if trajectory.dim != 2 {
+        bail!(
+            "rendering needs a 2D dataset, this one is {}D",
+            trajectory.dim
+        );
     }
-    let (scale, offset) = (
-        metadata.position_scale as f32,
-        metadata.position_offset as f32,
-    );
-    let resolution: Vec<usize> = metadata
-        .bounds
-        .iter()
-        .map(|[lo, hi]| ((hi - lo) / metadata.position_scale).round().max(1.0) as usize)
-        .collect();
-    let upper: Vec<f32> = resolution.iter().map(|&n| n as f32).collect();
-    let kinds: Vec<u8> = trajectory
-        .particle_type
-        .iter()
-        .map(|&t| {
-            if t == LIQUID {
-                KIND_LIQUID
-            } else {
-                KIND_OBSTACLE
-            }
-        })
-        .collect();
-    let style = FrameStyle {
-        pixels_per_cell,
-        ..FrameStyle::default()
-    };
+    let renderer = DatasetRenderer::new(&metadata, pixels_per_cell)?;
+    let kinds = DatasetRenderer::kinds(&trajectory.particle_type);
     let mut gif: Option<GifWriter> = None;
     let mut pictures = 0;
     for t in (0..trajectory.frames).step_by(frame_every.max(1)) {
-        let cells: Vec<f32> = trajectory
-            .frame(t)
-            .iter()
-            .map(|x| (x - offset) / scale)
-            .collect();
-        let image = render_frame(
-            &cells,
-            dim,
-            &kinds,
-            &[0.0, 0.0],
-            &upper,
-            &resolution,
-            None,
-            &style,
-        )?;
+        let image = renderer.render(trajectory.frame(t), &kinds)?;
         let writer = match &mut gif {
             Some(w) => w,
             None => gif.insert(GifWriter::create(out, image.width, image.height, 5)?),

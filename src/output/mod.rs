@@ -29,7 +29,7 @@ pub use phi_io::IoError;
 pub(crate) use phi_io::write_atomic;
 pub use render::{
     DEPTH_LEVELS, FrameStyle, GifWriter, KIND_LIQUID, KIND_OBSTACLE, RgbImage, render_frame,
-    write_png,
+    side_by_side, write_png,
 };
 
 /// Errors of the output module.

@@ -94,6 +94,59 @@ impl RgbImage {
     }
 }
 
+/// Pictures of the same height placed left to right, `gap` columns of `gap_color` between
+/// neighbours (a rollout's truth beside its prediction).
+///
+/// Fails with [`OutputError::InvalidInput`] when there is no picture, the heights differ or a
+/// picture's pixels do not fill its size.
+pub fn side_by_side(
+    images: &[&RgbImage],
+    gap: u32,
+    gap_color: [u8; 3],
+) -> Result<RgbImage, OutputError> {
+    let Some(first) = images.first() else {
+        return Err(OutputError::InvalidInput(
+            "side_by_side: no pictures".into(),
+        ));
+    };
+    let height = first.height;
+    let mut width = 0u32;
+    for (i, image) in images.iter().enumerate() {
+        image.validate()?;
+        if image.height != height {
+            return Err(OutputError::InvalidInput(format!(
+                "side_by_side: picture {i} is {} pixels high, picture 0 {height}",
+                image.height
+            )));
+        }
+        let gap = if i == 0 { 0 } else { gap };
+        width = width
+            .checked_add(gap)
+            .and_then(|w| w.checked_add(image.width))
+            .ok_or_else(|| OutputError::InvalidInput("side_by_side: too wide".into()))?;
+    }
+    if u64::from(width) * u64::from(height) > MAX_PIXELS {
+        return Err(OutputError::InvalidInput(format!(
+            "side_by_side: a {width}x{height} picture is too large"
+        )));
+    }
+    let mut out = RgbImage::new(width, height, gap_color);
+    let row_bytes = width as usize * 3;
+    let mut x0 = 0usize;
+    for (i, image) in images.iter().enumerate() {
+        if i > 0 {
+            x0 += gap as usize;
+        }
+        let w = image.width as usize * 3;
+        for y in 0..height as usize {
+            let dst = y * row_bytes + x0 * 3;
+            out.pixels[dst..dst + w].copy_from_slice(&image.pixels[y * w..(y + 1) * w]);
+        }
+        x0 += image.width as usize;
+    }
+    Ok(out)
+}
+
 /// How [`render_frame`] draws a frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FrameStyle {
@@ -651,6 +704,23 @@ mod tests {
             &style(),
         )
         .unwrap()
+    }
+
+    #[test]
+    fn side_by_side_places_pictures_left_to_right() {
+        let red = RgbImage::new(2, 3, [255, 0, 0]);
+        let blue = RgbImage::new(4, 3, [0, 0, 255]);
+        let both = side_by_side(&[&red, &blue], 1, WHITE).unwrap();
+        assert_eq!((both.width, both.height), (7, 3));
+        for y in 0..3 {
+            assert_eq!(both.pixel(1, y), Some([255, 0, 0]));
+            assert_eq!(both.pixel(2, y), Some(WHITE));
+            assert_eq!(both.pixel(3, y), Some([0, 0, 255]));
+            assert_eq!(both.pixel(6, y), Some([0, 0, 255]));
+        }
+        let short = RgbImage::new(2, 2, WHITE);
+        assert!(side_by_side(&[&red, &short], 1, WHITE).is_err());
+        assert!(side_by_side(&[], 1, WHITE).is_err());
     }
 
     #[test]

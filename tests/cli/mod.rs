@@ -1,4 +1,5 @@
-//! The `phi` command line: `phi simulate` end to end, and its errors.
+//! The `phi` command line end to end, and its errors: `phi simulate` here, the other commands
+//! in the modules below.
 
 use std::path::PathBuf;
 use std::process::{Command, Output};
@@ -7,6 +8,7 @@ use phi::output::read_npz;
 
 mod dataset;
 mod optimize;
+mod rollout;
 
 fn phi() -> Command {
     Command::new(env!("CARGO_BIN_EXE_phi"))

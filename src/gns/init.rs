@@ -1,0 +1,296 @@
+//! `phi model init`: a model directory with seeded random weights for a dataset.
+//!
+//! The dimension, bounds, velocity and acceleration statistics and particle types come from the
+//! dataset's `metadata.json`; the sizes default to the thesis' ([`GnsConfig::thesis`]), the
+//! connectivity radius to the dataset's `default_connectivity_radius`, and boundary features
+//! are off for a dataset whose walls are particles (variant `walls_as_particles`). The same
+//! options and seed give the same bytes.
+//!
+//! The directory is written only when it does not exist, is empty, or holds nothing but a
+//! `model.json` and `model.safetensors` that this command wrote (its `model.json` says
+//! `"provenance": {"made_by": "phi model init", ...}`); anything else (other files, a trained
+//! model, weights without a `model.json`) is refused.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use phi_core::backend::Host;
+use phi_gns::data::{METADATA_FILE, Metadata, Variant, read_metadata};
+use phi_gns::model::{Gns, GnsConfig, MODEL_FILE, ModelError, ModelSpec, WEIGHTS_FILE, save_model};
+
+use super::is_temporary_of;
+
+/// The value of `provenance.made_by` in the `model.json` this command writes.
+pub const MADE_BY: &str = "phi model init";
+
+/// `phi model <command>`.
+#[derive(Debug, clap::Subcommand)]
+pub enum ModelCommand {
+    /// Write a model directory (model.json, model.safetensors) with seeded random weights for
+    /// a dataset; sizes default to the thesis' GNS.
+    Init(InitArgs),
+}
+
+/// `phi model init --data DATASET --out DIR [options]`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct InitArgs {
+    /// The dataset: its metadata.json gives the dimension, bounds, statistics and particle
+    /// types.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// The model directory to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// The seed of the initial weights.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Width of the node and edge latents [default: 128].
+    #[arg(long)]
+    pub latent: Option<usize>,
+    /// Width of the hidden layers of every MLP [default: 128].
+    #[arg(long)]
+    pub hidden: Option<usize>,
+    /// Hidden layers per MLP [default: 2].
+    #[arg(long)]
+    pub hidden_layers: Option<usize>,
+    /// Unshared interaction-network steps M [default: 10].
+    #[arg(long)]
+    pub message_passing_steps: Option<usize>,
+    /// Past velocities C in the node features [default: 5].
+    #[arg(long)]
+    pub input_velocities: Option<usize>,
+    /// Width of the particle-type embedding [default: 16].
+    #[arg(long)]
+    pub embedding: Option<usize>,
+    /// Connectivity radius R in stored units [default: the dataset's
+    /// default_connectivity_radius].
+    #[arg(long)]
+    pub radius: Option<f64>,
+    /// No distances to the domain bounds in the node features (the default for a dataset whose
+    /// walls are particles).
+    #[arg(long, conflicts_with = "boundary_features")]
+    pub no_boundary_features: bool,
+    /// Distances to the domain bounds in the node features even for a dataset whose walls are
+    /// particles.
+    #[arg(long)]
+    pub boundary_features: bool,
+    /// Standard deviation σ of the training noise; it widens the normalisation [default: 0].
+    #[arg(long)]
+    pub noise_std: Option<f64>,
+}
+
+/// What `phi model init` wrote.
+#[derive(Debug, Clone)]
+pub struct InitSummary {
+    /// The model's `model.json`.
+    pub spec: ModelSpec,
+    /// Scalar parameters.
+    pub parameters: usize,
+    /// Parameter tensors.
+    pub tensors: usize,
+}
+
+/// The configuration the options ask for, on top of the thesis' sizes and the dataset's facts.
+pub fn config_for(args: &InitArgs, metadata: &Metadata) -> GnsConfig {
+    let mut config = GnsConfig::thesis(metadata.dim);
+    config.connectivity_radius = metadata.default_connectivity_radius;
+    config.boundary_features = metadata.variant != Variant::WallsAsParticles;
+    let set = |target: &mut usize, value: Option<usize>| {
+        if let Some(v) = value {
+            *target = v;
+        }
+    };
+    set(&mut config.latent_size, args.latent);
+    set(&mut config.hidden_size, args.hidden);
+    set(&mut config.hidden_layers, args.hidden_layers);
+    set(
+        &mut config.message_passing_steps,
+        args.message_passing_steps,
+    );
+    set(&mut config.input_velocities, args.input_velocities);
+    set(&mut config.embedding_size, args.embedding);
+    if let Some(r) = args.radius {
+        config.connectivity_radius = r;
+    }
+    if args.no_boundary_features {
+        config.boundary_features = false;
+    }
+    if args.boundary_features {
+        config.boundary_features = true;
+    }
+    if let Some(sigma) = args.noise_std {
+        config.noise_std = sigma;
+    }
+    config
+}
+
+/// The option of `phi model init` behind a `model.json` key.
+fn option_of(key: &str) -> Option<&'static str> {
+    Some(match key {
+        "config.latent_size" => "--latent",
+        "config.hidden_size" => "--hidden",
+        "config.hidden_layers" => "--hidden-layers",
+        "config.message_passing_steps" => "--message-passing-steps",
+        "config.input_velocities" => "--input-velocities",
+        "config.embedding_size" => "--embedding",
+        "config.connectivity_radius" => "--radius",
+        "config.noise_std" => "--noise-std",
+        _ => return None,
+    })
+}
+
+/// Writes the model directory of `args` and returns what it holds.
+///
+/// # Errors
+/// An unreadable dataset, options that do not make a valid model (naming the option), a
+/// dataset without usable statistics (naming its metadata key), an output directory this
+/// command did not write, I/O errors.
+pub fn init(args: &InitArgs) -> Result<InitSummary> {
+    let metadata = read_metadata(&args.data)?;
+    let config = config_for(args, &metadata);
+    let mut spec = ModelSpec::for_dataset(&metadata, config, args.seed);
+    spec.provenance = serde_json::json!({
+        "made_by": MADE_BY,
+        "phi_version": env!("CARGO_PKG_VERSION"),
+        "dataset": args.data.display().to_string(),
+    });
+    let metadata_path = args.data.join(METADATA_FILE);
+    if let Err(e) = spec.validate(&args.out.join(MODEL_FILE)) {
+        match &e {
+            ModelError::Config { key, reason, .. } => {
+                if let Some(option) = option_of(key) {
+                    bail!("{option}: {reason} (model.json key '{key}')");
+                }
+                if let Some(stat) = key.strip_prefix("normalisation.") {
+                    bail!(
+                        "'{}': key '{stat}': {reason}; pass --noise-std σ > 0 to widen the \
+                         normalisation",
+                        metadata_path.display()
+                    );
+                }
+                if key == "bounds" || key == "particle_types" {
+                    bail!("'{}': key '{key}': {reason}", metadata_path.display());
+                }
+                return Err(e.into());
+            }
+            _ => return Err(e.into()),
+        }
+    }
+    check_model_dir(&args.out)?;
+    let model = Gns::<Host>::init(spec, &Default::default())?;
+    save_model(&args.out, &model)?;
+    Ok(InitSummary {
+        spec: model.spec().clone(),
+        parameters: model.params().scalar_count(),
+        tensors: model.params().len(),
+    })
+}
+
+/// Refuses a model directory that `phi model init` did not write: one that is a file, holds
+/// files other than `model.json` and `model.safetensors` (and the temporary files of their
+/// atomic writes), or whose `model.json` is missing or lacks `"provenance": {"made_by":
+/// "phi model init"}`. A missing or empty directory is fine.
+///
+/// # Errors
+/// Naming the directory and the file that is not ours.
+pub fn check_model_dir(out: &Path) -> Result<()> {
+    if !out.exists() {
+        return Ok(());
+    }
+    if !out.is_dir() {
+        bail!("{} exists and is not a directory", out.display());
+    }
+    let ours = [MODEL_FILE, WEIGHTS_FILE];
+    let mut present = Vec::new();
+    for entry in std::fs::read_dir(out).with_context(|| format!("reading {}", out.display()))? {
+        let name = entry
+            .with_context(|| format!("reading {}", out.display()))?
+            .file_name();
+        if is_temporary_of(&name, &ours) {
+            continue;
+        }
+        match name.to_str().filter(|n| ours.contains(n)) {
+            Some(n) => present.push(n.to_string()),
+            None => bail!(
+                "{} holds '{}', which `phi model init` did not write; choose another --out or \
+                 empty it",
+                out.display(),
+                name.to_string_lossy()
+            ),
+        }
+    }
+    if present.is_empty() {
+        return Ok(());
+    }
+    let json = out.join(MODEL_FILE);
+    if !json.is_file() {
+        bail!(
+            "{} holds {WEIGHTS_FILE} without {MODEL_FILE}: not a model `phi model init` wrote \
+             (it writes both); refusing to overwrite it",
+            out.display()
+        );
+    }
+    let value: Option<serde_json::Value> = std::fs::read(&json)
+        .ok()
+        .and_then(|bytes| serde_json::from_slice(&bytes).ok());
+    let made_by = value
+        .as_ref()
+        .and_then(|v| v.get("provenance"))
+        .and_then(|p| p.get("made_by"))
+        .and_then(|m| m.as_str());
+    if made_by != Some(MADE_BY) {
+        bail!(
+            "'{}': a model that `phi model init` did not write (provenance.made_by is {}); \
+             refusing to overwrite it: choose another --out",
+            json.display(),
+            made_by.map_or("missing".to_string(), |m| format!("'{m}'"))
+        );
+    }
+    Ok(())
+}
+
+/// Runs `phi model <command>` and prints what it wrote.
+///
+/// # Errors
+/// As [`init`].
+pub fn run(command: ModelCommand) -> Result<()> {
+    match command {
+        ModelCommand::Init(args) => {
+            let summary = init(&args)?;
+            let c = &summary.spec.config;
+            println!(
+                "{}: {}D, bounds {:?}, particle types {:?}",
+                args.data.display(),
+                c.dim,
+                summary.spec.bounds,
+                summary.spec.particle_types
+            );
+            println!(
+                "model: {} parameters in {} tensors (latent {}, hidden {} × {} layers, {} \
+                 message-passing steps, C = {}, R = {}, embedding {}, boundary features {}, \
+                 noise σ = {}, seed {})",
+                summary.parameters,
+                summary.tensors,
+                c.latent_size,
+                c.hidden_size,
+                c.hidden_layers,
+                c.message_passing_steps,
+                c.input_velocities,
+                c.connectivity_radius,
+                if c.uses_embedding() {
+                    c.embedding_size.to_string()
+                } else {
+                    "none".to_string()
+                },
+                if c.boundary_features { "on" } else { "off" },
+                c.noise_std,
+                summary.spec.seed
+            );
+            println!(
+                "wrote {}/{MODEL_FILE} and {WEIGHTS_FILE}",
+                args.out.display()
+            );
+            Ok(())
+        }
+    }
+}

@@ -1,0 +1,650 @@
+//! `phi rollout`: a GNS rolled out on trajectories of a dataset, its predictions beside the
+//! ground truth (thesis fig. 5.8).
+//!
+//! For each trajectory `I` of the split, the directory `OUT/<split>_<I>/` holds:
+//! - `rollout.npz`: `predicted_position` and `true_position` `[steps, N, dim]` float32 (the
+//!   predicted and the dataset's positions of frames `start + 1 ..= start + steps`, stored
+//!   units), `particle_type [N]` int64, `start [1]` int64, `frame [steps]` int64 (the frame index
+//!   of each row). Written atomically, first after `checkpoint_every` steps and then every
+//!   `checkpoint_every` steps, and at the end, so that a killed run keeps its frames.
+//! - `rollout.json` ([`RolloutRecord`]): what was rolled out, the steps done, whether the
+//!   rollout is complete (and why not), the per-frame position MSE over the non-kinematic
+//!   particles and its mean, the wall time. Written first (`"complete": false`), at every
+//!   checkpoint, and last.
+//! - `rollout.gif`: the truth (left) and the prediction (right) of the start frame and of every
+//!   `frame_every`-th step, drawn as `phi render` draws a dataset (2D datasets only).
+//!
+//! A prediction with a NaN or infinite position stops the trajectory's rollout: the frames
+//! before it are written, `rollout.json` says `"complete": false` with the reason (step, frame
+//! and particle) and `failed_step`, the GIF is closed, and the command exits non-zero once the
+//! other trajectories are done.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use phi_gns::data::{Dataset, METADATA_FILE, Trajectory};
+use phi_gns::model::{Gns, GnsKernels, ModelError, load_model, read_spec};
+use phi_gns::rollout::{RolloutRange, rollout};
+use serde::{Deserialize, Serialize};
+
+use super::is_temporary_of;
+use crate::backends::BackendKind;
+use crate::dataset::render::DatasetRenderer;
+use crate::output::{
+    ArrayData, FrameStyle, GifWriter, NpyArray, OutputError, RgbImage, side_by_side, write_atomic,
+    write_npz,
+};
+
+/// The value of [`RolloutRecord::format`].
+pub const ROLLOUT_FORMAT: &str = "phi-rollout";
+/// The value of [`RolloutRecord::format_version`].
+pub const ROLLOUT_FORMAT_VERSION: u32 = 1;
+/// The record of a rollout directory.
+pub const RECORD_FILE: &str = "rollout.json";
+/// The positions of a rollout directory.
+pub const POSITIONS_FILE: &str = "rollout.npz";
+/// The animation of a rollout directory.
+pub const GIF_FILE: &str = "rollout.gif";
+/// [`RolloutRecord::reason`] while the rollout runs (what a killed run leaves).
+pub const RUNNING: &str = "not finished: the rollout is running or was interrupted";
+
+/// Columns of background between the truth and the prediction in the GIF.
+const GIF_GAP: u32 = 6;
+
+/// `phi rollout --model DIR --data DATASET --out DIR [options]`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct RolloutArgs {
+    /// The model directory (model.json, model.safetensors).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// The dataset directory.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// The split of the trajectories.
+    #[arg(long, default_value = "test")]
+    pub split: String,
+    /// The trajectory's index in the split [default: 0].
+    #[arg(long, conflicts_with = "all")]
+    pub index: Option<usize>,
+    /// Roll out every trajectory of the split.
+    #[arg(long)]
+    pub all: bool,
+    /// The last ground-truth frame of the input window [default: C, the model's input
+    /// velocities].
+    #[arg(long)]
+    pub start: Option<usize>,
+    /// Predicted frames [default: up to the trajectory's last frame].
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// The backend [default: ndarray].
+    #[arg(long)]
+    pub backend: Option<BackendKind>,
+    /// The output directory: one folder `<split>_<index>` per trajectory.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Rewrite rollout.npz and rollout.json every this many steps (0: only at the end).
+    #[arg(long, default_value_t = 25)]
+    pub checkpoint_every: usize,
+    /// A GIF picture every this many steps (0: no GIF).
+    #[arg(long, default_value_t = 1)]
+    pub frame_every: usize,
+    /// Pixels per grid cell in the GIF.
+    #[arg(long, default_value_t = 6)]
+    pub pixels_per_cell: u32,
+    /// Print the MSE of every frame (default: the first, quartile and last steps).
+    #[arg(long)]
+    pub verbose: bool,
+}
+
+/// `rollout.json`: one trajectory's rollout.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RolloutRecord {
+    /// Always [`ROLLOUT_FORMAT`]; marks the directory as written by `phi rollout`.
+    pub format: String,
+    /// Always [`ROLLOUT_FORMAT_VERSION`].
+    pub format_version: u32,
+    /// `phi rollout` and its version.
+    pub made_by: String,
+    /// The model directory, as given.
+    pub model: String,
+    /// The dataset directory, as given.
+    pub dataset: String,
+    /// The split.
+    pub split: String,
+    /// The trajectory's index in the split.
+    pub index: usize,
+    /// The trajectory's generator seed.
+    pub trajectory_seed: u64,
+    /// The backend's name.
+    pub backend: String,
+    /// Particles of the trajectory.
+    pub particles: usize,
+    /// Of which kinematic (their positions follow the truth, and the MSE leaves them out).
+    pub kinematic_particles: usize,
+    /// `C`, the model's input velocities.
+    pub input_velocities: usize,
+    /// The last ground-truth frame of the input window.
+    pub start: usize,
+    /// The ground-truth frames the model reads first: `[start − C, start]`.
+    pub window: [usize; 2],
+    /// The steps asked for.
+    pub steps_requested: usize,
+    /// The steps done: predicted frames `start + 1 ..= start + steps`.
+    pub steps: usize,
+    /// Whether every requested step was predicted and written.
+    pub complete: bool,
+    /// Why not (`null` when complete).
+    pub reason: Option<String>,
+    /// The step that failed (`null` when none did).
+    pub failed_step: Option<usize>,
+    /// The position MSE of each predicted frame (stored units², over the non-kinematic
+    /// particles and the dimensions).
+    pub mse: Vec<f64>,
+    /// The mean of `mse` (`null` without frames).
+    pub mse_mean: Option<f64>,
+    /// The GIF's file name (`null` without one).
+    pub gif: Option<String>,
+    /// Pictures in the GIF.
+    pub gif_pictures: usize,
+    /// Seconds from the first step to the last write.
+    pub wall_seconds: f64,
+    /// Of which in the model (graph, network, integration), not writing files.
+    pub model_seconds: f64,
+}
+
+/// The position MSE of one frame: the mean of `(predicted − truth)²` over the particles that
+/// are not `kinematic` and the `dim` components (0 when every particle is kinematic).
+pub fn position_mse(predicted: &[f32], truth: &[f32], kinematic: &[bool], dim: usize) -> f64 {
+    let mut sum = 0.0f64;
+    let mut count = 0usize;
+    for (i, _) in kinematic.iter().enumerate().filter(|(_, k)| !**k) {
+        for a in i * dim..(i + 1) * dim {
+            let d = f64::from(predicted[a]) - f64::from(truth[a]);
+            sum += d * d;
+            count += 1;
+        }
+    }
+    if count == 0 { 0.0 } else { sum / count as f64 }
+}
+
+/// The folder of trajectory `index` of `split` in the output directory: `<split>_<index>`.
+pub fn rollout_dir_name(split: &str, index: usize) -> String {
+    format!("{split}_{index}")
+}
+
+/// What was checked before any rollout: the dataset, the trajectories, the
+/// range and the output folders.
+#[derive(Debug)]
+pub struct Plan {
+    dataset: Dataset,
+    indices: Vec<usize>,
+    range: RolloutRange,
+    dirs: Vec<PathBuf>,
+}
+
+/// Checks everything a rollout needs before anything is written: the model's `model.json`, the
+/// dataset and that the model fits it ([`ModelSpec::check_dataset`](phi_gns::model::ModelSpec::check_dataset): dimension, bounds,
+/// particle types), the split and index, the start and steps, and the output folders
+/// ([`check_rollout_dir`]).
+///
+/// # Errors
+/// Naming the file, key or option and what is wrong.
+pub fn plan(args: &RolloutArgs) -> Result<Plan> {
+    let spec = read_spec(&args.model)?;
+    let dataset = Dataset::open(&args.data)?;
+    spec.check_dataset(dataset.metadata(), &args.data.join(METADATA_FILE))?;
+    let count = dataset.split_len(&args.split)?;
+    let indices: Vec<usize> = if args.all {
+        if count == 0 {
+            bail!(
+                "{}: split '{}' has no trajectories",
+                args.data.display(),
+                args.split
+            );
+        }
+        (0..count).collect()
+    } else {
+        let index = args.index.unwrap_or(0);
+        if index >= count {
+            bail!(
+                "{}: --index {index}: split '{}' has {count} trajectories{}",
+                args.data.display(),
+                args.split,
+                match count {
+                    0 => String::new(),
+                    1 => " (index 0)".to_string(),
+                    n => format!(" (indices 0..={})", n - 1),
+                }
+            );
+        }
+        vec![index]
+    };
+    let frames = dataset.metadata().frames();
+    let c = spec.config.input_velocities;
+    let start = args.start.unwrap_or(c);
+    if start < c {
+        bail!(
+            "--start {start}: the model reads the {c} frames before the start, so a rollout \
+             starts at frame {c} or later"
+        );
+    }
+    if start + 1 >= frames {
+        bail!(
+            "--start {start}: the trajectories of '{}' have {frames} frames (0..={}), so a \
+             rollout starts at frame {} at the latest",
+            args.split,
+            frames - 1,
+            frames.saturating_sub(2)
+        );
+    }
+    let steps = args.steps.unwrap_or(frames - 1 - start);
+    if steps == 0 {
+        bail!("--steps 0: nothing to predict");
+    }
+    let range = RolloutRange { start, steps };
+    range.check(c, frames).with_context(|| {
+        format!(
+            "--steps {steps}: the trajectories of '{}' end at frame {}",
+            args.split,
+            frames - 1
+        )
+    })?;
+    crate::simulate::check_out_dir(&args.out)?;
+    let dirs: Vec<PathBuf> = indices
+        .iter()
+        .map(|&i| args.out.join(rollout_dir_name(&args.split, i)))
+        .collect();
+    for dir in &dirs {
+        check_rollout_dir(dir)?;
+    }
+    Ok(Plan {
+        dataset,
+        indices,
+        range,
+        dirs,
+    })
+}
+
+/// Refuses a rollout folder that `phi rollout` did not write: one that is a file, holds
+/// anything but `rollout.json`, `rollout.npz`, `rollout.gif` (and the temporary files of their
+/// atomic writes), or holds files without a `rollout.json` of [`ROLLOUT_FORMAT`]. A missing or
+/// empty folder is fine. (`rollout.json` is the first file a rollout writes.)
+///
+/// # Errors
+/// Naming the folder and the file that is not ours.
+pub fn check_rollout_dir(dir: &Path) -> Result<()> {
+    if !dir.exists() {
+        return Ok(());
+    }
+    if !dir.is_dir() {
+        bail!("{} exists and is not a directory", dir.display());
+    }
+    let ours = [RECORD_FILE, POSITIONS_FILE, GIF_FILE];
+    let mut any = false;
+    for entry in std::fs::read_dir(dir).with_context(|| format!("reading {}", dir.display()))? {
+        let name = entry
+            .with_context(|| format!("reading {}", dir.display()))?
+            .file_name();
+        if is_temporary_of(&name, &ours) {
+            continue;
+        }
+        if !name.to_str().is_some_and(|n| ours.contains(&n)) {
+            bail!(
+                "{} holds '{}', which `phi rollout` did not write; choose another --out",
+                dir.display(),
+                name.to_string_lossy()
+            );
+        }
+        any = true;
+    }
+    if !any {
+        return Ok(());
+    }
+    let record = dir.join(RECORD_FILE);
+    let format = std::fs::read(&record)
+        .ok()
+        .and_then(|bytes| serde_json::from_slice::<serde_json::Value>(&bytes).ok())
+        .and_then(|v| v.get("format").and_then(|f| f.as_str()).map(str::to_string));
+    if format.as_deref() != Some(ROLLOUT_FORMAT) {
+        bail!(
+            "{} holds rollout files without a {RECORD_FILE} of format '{ROLLOUT_FORMAT}': \
+             `phi rollout` did not write them; refusing to overwrite them: choose another --out",
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
+/// Runs `phi rollout` and prints each trajectory's MSE.
+///
+/// # Errors
+/// As [`plan`]; a model that does not load; I/O errors; and, after every trajectory was
+/// rolled out, an error naming each one that stopped early and its step.
+pub fn run(args: RolloutArgs) -> Result<()> {
+    let plan = plan(&args)?;
+    let kind = args.backend.unwrap_or(BackendKind::available()[0]);
+    let records = crate::with_backend!(kind, B => roll_all::<B>(&plan, &args))?;
+    let failed: Vec<String> = records
+        .iter()
+        .zip(&plan.dirs)
+        .filter(|(r, _)| !r.complete)
+        .map(|(r, dir)| {
+            format!(
+                "{}: {} (the {} frames before it are in {POSITIONS_FILE})",
+                dir.display(),
+                r.reason.as_deref().unwrap_or("stopped"),
+                r.steps
+            )
+        })
+        .collect();
+    if !failed.is_empty() {
+        bail!(
+            "{} of {} rollouts stopped early:\n  {}",
+            failed.len(),
+            records.len(),
+            failed.join("\n  ")
+        );
+    }
+    Ok(())
+}
+
+/// Loads the model on backend `B` and rolls it out on each planned trajectory, printing each
+/// one's summary.
+fn roll_all<B: GnsKernels>(plan: &Plan, args: &RolloutArgs) -> Result<Vec<RolloutRecord>> {
+    let device = B::default_device();
+    let model = load_model::<B>(&args.model, &device)?;
+    let mut records = Vec::with_capacity(plan.indices.len());
+    for (&index, dir) in plan.indices.iter().zip(&plan.dirs) {
+        let record = roll_one::<B>(&model, plan, args, index, dir, &device)?;
+        print!("{}", format_record(&record, dir, args.verbose));
+        std::io::stdout().flush().ok();
+        records.push(record);
+    }
+    Ok(records)
+}
+
+/// One trajectory's rollout into `dir` (see the module docs). A failed prediction is recorded
+/// in the returned record, not returned as an error.
+fn roll_one<B: GnsKernels>(
+    model: &Gns<B>,
+    plan: &Plan,
+    args: &RolloutArgs,
+    index: usize,
+    dir: &Path,
+    device: &B::Device,
+) -> Result<RolloutRecord> {
+    let (trajectory, _) = plan.dataset.read_with_stats(&args.split, index)?;
+    let spec = model.spec();
+    let (n, dim) = (trajectory.particles, trajectory.dim);
+    let range = plan.range;
+    let kinematic: Vec<bool> = trajectory
+        .particle_type
+        .iter()
+        .map(|t| spec.kinematic_types.contains(t))
+        .collect();
+    let c = spec.config.input_velocities;
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut record = RolloutRecord {
+        format: ROLLOUT_FORMAT.to_string(),
+        format_version: ROLLOUT_FORMAT_VERSION,
+        made_by: format!("phi rollout {}", env!("CARGO_PKG_VERSION")),
+        model: args.model.display().to_string(),
+        dataset: args.data.display().to_string(),
+        split: args.split.clone(),
+        index,
+        trajectory_seed: trajectory.seed,
+        backend: B::name().to_string(),
+        particles: n,
+        kinematic_particles: kinematic.iter().filter(|k| **k).count(),
+        input_velocities: c,
+        start: range.start,
+        window: [range.start - c, range.start],
+        steps_requested: range.steps,
+        steps: 0,
+        complete: false,
+        reason: Some(RUNNING.to_string()),
+        failed_step: None,
+        mse: Vec::with_capacity(range.steps),
+        mse_mean: None,
+        gif: None,
+        gif_pictures: 0,
+        wall_seconds: 0.0,
+        model_seconds: 0.0,
+    };
+    // The record first: it marks the folder as ours. Files of an earlier run go.
+    write_record(dir, &record)?;
+    for stale in [POSITIONS_FILE, GIF_FILE] {
+        let path = dir.join(stale);
+        match std::fs::remove_file(&path) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(e).with_context(|| format!("removing {}", path.display())),
+        }
+    }
+
+    let renderer = if args.frame_every > 0 && dim == 2 {
+        Some(DatasetRenderer::new(
+            plan.dataset.metadata(),
+            args.pixels_per_cell,
+        )?)
+    } else {
+        None
+    };
+    let kinds = DatasetRenderer::kinds(&trajectory.particle_type);
+    let picture = |renderer: &DatasetRenderer, truth: &[f32], predicted: &[f32]| {
+        let left = renderer.render(truth, &kinds)?;
+        let right = renderer.render(predicted, &kinds)?;
+        Ok::<RgbImage, anyhow::Error>(side_by_side(
+            &[&left, &right],
+            GIF_GAP,
+            FrameStyle::default().background,
+        )?)
+    };
+    let mut gif: Option<GifWriter> = None;
+    if let Some(renderer) = &renderer {
+        let first = trajectory.frame(range.start);
+        let image = picture(renderer, first, first)?;
+        let mut writer = GifWriter::create(dir.join(GIF_FILE), image.width, image.height, 5)?;
+        writer.add_frame(&image)?;
+        gif = Some(writer);
+        record.gif = Some(GIF_FILE.to_string());
+        record.gif_pictures = 1;
+    }
+
+    let bar = progress_bar(range.steps, &rollout_dir_name(&args.split, index));
+    let mut predicted: Vec<f32> = Vec::with_capacity(range.steps * n * dim);
+    let started = Instant::now();
+    let mut output_seconds = 0.0;
+    let mut output_error: Option<anyhow::Error> = None;
+    let result = rollout(model, &trajectory, range, device, |step, positions| {
+        let written = Instant::now();
+        let outcome = (|| -> Result<()> {
+            predicted.extend_from_slice(positions);
+            let truth = trajectory.frame(range.start + step);
+            record
+                .mse
+                .push(position_mse(positions, truth, &kinematic, dim));
+            record.steps = step;
+            if let (Some(renderer), Some(writer)) = (&renderer, gif.as_mut())
+                && step % args.frame_every == 0
+            {
+                writer.add_frame(&picture(renderer, truth, positions)?)?;
+                record.gif_pictures += 1;
+            }
+            if args.checkpoint_every > 0 && step % args.checkpoint_every == 0 && step < range.steps
+            {
+                record.wall_seconds = started.elapsed().as_secs_f64();
+                write_positions(dir, &trajectory, range.start, &predicted)?;
+                write_record(dir, &record)?;
+            }
+            bar.inc(1);
+            Ok(())
+        })();
+        output_seconds += written.elapsed().as_secs_f64();
+        outcome.map_err(|e| {
+            output_error = Some(e);
+            ModelError::Input {
+                what: "rollout output",
+                reason: "a file could not be written".into(),
+            }
+        })
+    });
+    bar.finish_and_clear();
+    if let Some(e) = output_error {
+        if let Some(writer) = gif {
+            let _ = writer.finish();
+        }
+        return Err(e);
+    }
+    match result {
+        Ok(()) => {
+            record.complete = true;
+            record.reason = None;
+        }
+        Err(e) => {
+            let step = record.steps + 1;
+            record.failed_step = Some(step);
+            record.reason = Some(match e {
+                ModelError::NonFinitePrediction { .. } => e.to_string(),
+                other => format!(
+                    "rollout step {step} (frame {}): {other}",
+                    range.start + step
+                ),
+            });
+        }
+    }
+    record.mse_mean =
+        (!record.mse.is_empty()).then(|| record.mse.iter().sum::<f64>() / record.mse.len() as f64);
+    write_positions(dir, &trajectory, range.start, &predicted)?;
+    if let Some(writer) = gif {
+        writer.finish()?;
+    }
+    let elapsed = started.elapsed().as_secs_f64();
+    record.model_seconds = (elapsed - output_seconds).max(0.0);
+    record.wall_seconds = elapsed;
+    write_record(dir, &record)?;
+    Ok(record)
+}
+
+/// A progress bar of `steps` steps on stderr when it is a terminal, else a hidden one.
+fn progress_bar(steps: usize, name: &str) -> ProgressBar {
+    if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(steps as u64);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{spinner} {elapsed_precise} [{bar:40}] {pos}/{len} steps, {per_sec}, ETA {eta} {msg}",
+        )
+        .expect("a valid template")
+        .progress_chars("=> "),
+    );
+    bar.set_message(name.to_string());
+    bar
+}
+
+/// `rollout.npz` of the frames predicted so far (see the module docs).
+fn write_positions(
+    dir: &Path,
+    trajectory: &Trajectory,
+    start: usize,
+    predicted: &[f32],
+) -> Result<()> {
+    let (n, dim) = (trajectory.particles, trajectory.dim);
+    let per_frame = n * dim;
+    let steps = predicted.len() / per_frame;
+    let truth = &trajectory.position[(start + 1) * per_frame..(start + 1 + steps) * per_frame];
+    let frames: Vec<i64> = (start + 1..=start + steps).map(|f| f as i64).collect();
+    let arrays = [
+        (
+            "predicted_position",
+            NpyArray::new(vec![steps, n, dim], ArrayData::F32(predicted.to_vec()))?,
+        ),
+        (
+            "true_position",
+            NpyArray::new(vec![steps, n, dim], ArrayData::F32(truth.to_vec()))?,
+        ),
+        (
+            "particle_type",
+            NpyArray::from_vec(trajectory.particle_type.clone()),
+        ),
+        ("start", NpyArray::from_vec(vec![start as i64])),
+        ("frame", NpyArray::from_vec(frames)),
+    ];
+    let refs: Vec<(&str, &NpyArray)> = arrays.iter().map(|(k, a)| (*k, a)).collect();
+    write_npz(dir.join(POSITIONS_FILE), &refs)?;
+    Ok(())
+}
+
+/// `rollout.json`, atomically.
+fn write_record(dir: &Path, record: &RolloutRecord) -> Result<()> {
+    let mut text = serde_json::to_vec_pretty(record)?;
+    text.push(b'\n');
+    let path = dir.join(RECORD_FILE);
+    write_atomic(&path, |w| {
+        w.write_all(&text)
+            .map_err(|e| OutputError::io(&path, "cannot write", e))
+    })?;
+    Ok(())
+}
+
+/// The steps whose MSE the summary prints: every step with `verbose` or at most 6 steps, else
+/// the first, the quartiles and the last.
+pub fn printed_steps(steps: usize, verbose: bool) -> Vec<usize> {
+    if verbose || steps <= 6 {
+        return (1..=steps).collect();
+    }
+    let mut shown = vec![1, steps / 4, steps / 2, 3 * steps / 4, steps];
+    shown.dedup();
+    shown
+}
+
+/// The summary `phi rollout` prints for one trajectory: what ran, the MSE table, what it wrote.
+pub fn format_record(record: &RolloutRecord, dir: &Path, verbose: bool) -> String {
+    let mut text = format!(
+        "{}: {} of {} steps from frame {} (window {}..={}) on {}, {} particles ({} kinematic), \
+         {:.2} s ({:.2} ms/step in the model)\n",
+        rollout_dir_name(&record.split, record.index),
+        record.steps,
+        record.steps_requested,
+        record.start,
+        record.window[0],
+        record.window[1],
+        record.backend,
+        record.particles,
+        record.kinematic_particles,
+        record.wall_seconds,
+        1e3 * record.model_seconds / record.steps.max(1) as f64,
+    );
+    if !record.mse.is_empty() {
+        text.push_str("   step  frame  position MSE (stored units², non-kinematic particles)\n");
+        for step in printed_steps(record.mse.len(), verbose) {
+            text.push_str(&format!(
+                "  {step:>5}  {:>5}  {:.6e}\n",
+                record.start + step,
+                record.mse[step - 1]
+            ));
+        }
+        if let Some(mean) = record.mse_mean {
+            text.push_str(&format!("   mean         {mean:.6e}\n"));
+        }
+    }
+    if let Some(reason) = &record.reason {
+        text.push_str(&format!("  stopped: {reason}\n"));
+    }
+    let gif = match &record.gif {
+        Some(name) => format!(
+            ", {name} ({} pictures: truth left, prediction right)",
+            record.gif_pictures
+        ),
+        None => String::new(),
+    };
+    text.push_str(&format!(
+        "wrote {}: {POSITIONS_FILE}, {RECORD_FILE}{gif}\n",
+        dir.display()
+    ));
+    text
+}

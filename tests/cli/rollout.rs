@@ -1,0 +1,509 @@
+//! `phi model init` and `phi rollout` end to end, on tiny datasets and models.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use phi::output::{NpyArray, read_npz};
+use phi::phi_core::backend::ndarray::NdArray;
+use phi::phi_core::tensor::Tensor;
+use phi::phi_gns::data::{
+    Dataset, LIQUID, Metadata, OBSTACLE, Trajectory, TrajectoryStats, Variant, read_metadata,
+    write_metadata, write_trajectory,
+};
+use phi::phi_gns::model::{load_model, read_spec, save_model};
+
+use super::{ok, phi, scratch};
+
+/// The options of a tiny model.
+const TINY: [&str; 6] = [
+    "--latent",
+    "16",
+    "--hidden",
+    "16",
+    "--message-passing-steps",
+    "2",
+];
+
+/// A hand-made dataset in `dir`: two test trajectories of 10 frames, 12 liquid particles
+/// falling with some jitter beside 4 static obstacle particles, in `dim` dimensions, every axis
+/// within `bounds`.
+fn tiny_dataset(dir: &Path, dim: usize, bounds: [f64; 2], variant: Variant) {
+    let mut metadata = Metadata::new(dim);
+    metadata.bounds = vec![bounds; dim];
+    metadata.sequence_length = 9;
+    metadata.variant = variant;
+    metadata.splits.insert("test".into(), 2);
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut jitter = move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((state >> 40) as f64 / (1u64 << 24) as f64 - 0.5) as f32 * 2e-3
+    };
+    let (lo, width) = (bounds[0] as f32, (bounds[1] - bounds[0]) as f32);
+    let mut total = TrajectoryStats::new(dim);
+    std::fs::create_dir_all(dir.join("test")).unwrap();
+    for index in 0..2 {
+        let (liquid, obstacles) = (12, 4);
+        let mut types = vec![LIQUID; liquid];
+        types.extend([OBSTACLE; 4]);
+        let mut position = Vec::new();
+        for t in 0..10 {
+            let fall = 0.5e-3 * (t * t) as f32;
+            for i in 0..liquid {
+                for a in 0..dim {
+                    let grid = 0.01 * ((i >> (2 * a)) % 4) as f32;
+                    let down = if a == 1 { fall } else { 0.0 };
+                    position.push(lo + 0.5 * width + grid - down + jitter());
+                }
+            }
+            for j in 0..obstacles {
+                for a in 0..dim {
+                    let row = if a == 0 { 0.01 * j as f32 } else { 0.0 };
+                    position.push(lo + 0.2 * width + row);
+                }
+            }
+        }
+        let trajectory = Trajectory::new(dim, position, types, 100 + index as u64, index).unwrap();
+        let stats = TrajectoryStats::of(&trajectory);
+        total.merge(&stats).unwrap();
+        let path = Dataset::trajectory_path(dir, "test", index);
+        write_trajectory(&path, &trajectory, &stats).unwrap();
+    }
+    metadata.set_statistics(&total).unwrap();
+    write_metadata(dir, &metadata).unwrap();
+}
+
+fn init(data: &Path, out: &Path, extra: &[&str]) -> Output {
+    phi()
+        .args(["model", "init", "--data"])
+        .arg(data)
+        .arg("--out")
+        .arg(out)
+        .args(TINY)
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
+fn rollout(model: &Path, data: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut command: Command = phi();
+    command
+        .arg("rollout")
+        .arg("--model")
+        .arg(model)
+        .arg("--data")
+        .arg(data)
+        .arg("--out")
+        .arg(out)
+        .args(extra);
+    command.output().unwrap()
+}
+
+/// The standard error of a run that must have failed.
+fn failed(output: Output) -> String {
+    assert!(
+        !output.status.success(),
+        "the command succeeded: {}",
+        String::from_utf8_lossy(&output.stdout)
+    );
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+fn array(arrays: &[(String, NpyArray)], name: &str) -> NpyArray {
+    arrays
+        .iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, a)| a.clone())
+        .unwrap_or_else(|| panic!("no array '{name}'"))
+}
+
+/// The position MSE of each frame recomputed from `rollout.npz`: over the liquid particles and
+/// the dimensions.
+fn recomputed_mse(arrays: &[(String, NpyArray)]) -> Vec<f64> {
+    let (predicted, truth) = (
+        array(arrays, "predicted_position"),
+        array(arrays, "true_position"),
+    );
+    let types = array(arrays, "particle_type");
+    let types = types.as_i64().unwrap();
+    let [steps, n, dim] = predicted.shape[..] else {
+        panic!("predicted_position is not [steps, N, dim]")
+    };
+    let (p, t) = (predicted.as_f32().unwrap(), truth.as_f32().unwrap());
+    (0..steps)
+        .map(|s| {
+            let mut sum = 0.0f64;
+            let mut count = 0;
+            for i in (0..n).filter(|&i| types[i] == LIQUID) {
+                for a in 0..dim {
+                    let k = (s * n + i) * dim + a;
+                    sum += (f64::from(p[k]) - f64::from(t[k])).powi(2);
+                    count += 1;
+                }
+            }
+            sum / count as f64
+        })
+        .collect()
+}
+
+#[test]
+fn model_init_writes_a_seeded_model_for_the_dataset() {
+    let dir = scratch("model-init");
+    let data = dir.join("data");
+    tiny_dataset(&data, 2, [0.1, 0.9], Variant::Obstacles);
+    let model = dir.join("model");
+    let stdout = ok(init(&data, &model, &["--seed", "3"]));
+    let loaded = load_model::<NdArray>(&model, &Default::default()).unwrap();
+    let count = loaded.params().scalar_count();
+    assert!(
+        stdout.contains(&format!("model: {count} parameters")),
+        "{stdout}"
+    );
+    let spec = read_spec(&model).unwrap();
+    let metadata = read_metadata(&data).unwrap();
+    let c = &spec.config;
+    assert_eq!(
+        (c.latent_size, c.hidden_size, c.message_passing_steps),
+        (16, 16, 2)
+    );
+    // The rest are the thesis' sizes and the dataset's facts.
+    assert_eq!(
+        (c.hidden_layers, c.input_velocities, c.embedding_size),
+        (2, 5, 16)
+    );
+    assert_eq!(c.connectivity_radius, metadata.default_connectivity_radius);
+    assert!(c.boundary_features);
+    assert_eq!((c.dim, c.particle_types, spec.seed), (2, 2, 3));
+    assert_eq!(spec.bounds, metadata.bounds);
+    assert_eq!(spec.normalisation.acc_std, metadata.acc_std);
+    assert_eq!(spec.provenance["made_by"], "phi model init");
+    // Its own output is rewritten, to the same bytes.
+    let weights = std::fs::read(model.join("model.safetensors")).unwrap();
+    ok(init(&data, &model, &["--seed", "3"]));
+    assert_eq!(
+        std::fs::read(model.join("model.safetensors")).unwrap(),
+        weights
+    );
+    ok(init(&data, &model, &["--seed", "4"]));
+    assert_ne!(
+        std::fs::read(model.join("model.safetensors")).unwrap(),
+        weights
+    );
+
+    // Walls as particles: no boundary features unless asked for.
+    let walls = dir.join("walls");
+    tiny_dataset(&walls, 2, [0.1, 0.9], Variant::WallsAsParticles);
+    let m = dir.join("walls-model");
+    ok(init(&walls, &m, &["--radius", "0.05"]));
+    let spec = read_spec(&m).unwrap();
+    assert!(!spec.config.boundary_features);
+    assert_eq!(spec.config.connectivity_radius, 0.05);
+    ok(init(&walls, &m, &["--boundary-features"]));
+    assert!(read_spec(&m).unwrap().config.boundary_features);
+
+    // A bad size names the option.
+    let stderr = failed(init(&data, &dir.join("bad"), &["--hidden", "0"]));
+    assert!(stderr.contains("--hidden"), "{stderr}");
+    // Directories it did not write are refused, and left as they were.
+    let foreign = dir.join("foreign");
+    std::fs::create_dir_all(&foreign).unwrap();
+    std::fs::write(foreign.join("notes.txt"), "mine").unwrap();
+    let stderr = failed(init(&data, &foreign, &[]));
+    assert!(
+        stderr.contains("notes.txt") && stderr.contains("did not write"),
+        "{stderr}"
+    );
+    let mut trained = json(&model.join("model.json"));
+    trained["provenance"] = serde_json::json!({"made_by": "a training run"});
+    std::fs::write(model.join("model.json"), trained.to_string()).unwrap();
+    let stderr = failed(init(&data, &model, &[]));
+    assert!(
+        stderr.contains("model.json") && stderr.contains("a training run"),
+        "{stderr}"
+    );
+    assert_eq!(json(&model.join("model.json")), trained);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn rollout_writes_predictions_truth_mse_and_gif() {
+    let dir = scratch("rollout");
+    let data = dir.join("data");
+    ok(phi()
+        .args(["dataset", "generate", "--split", "test", "--count", "2"])
+        .args(["--steps", "30", "--out"])
+        .arg(&data)
+        .output()
+        .unwrap());
+    let model = dir.join("model");
+    ok(init(&data, &model, &[]));
+    let out = dir.join("rollouts");
+    // Test scene 1 (a narrow gap between obstacles): 8 steps from frame 5.
+    let args = [
+        "--index",
+        "1",
+        "--steps",
+        "8",
+        "--checkpoint-every",
+        "3",
+        "--frame-every",
+        "2",
+    ];
+    let stdout = ok(rollout(&model, &data, &out, &args));
+    let folder = out.join("test_1");
+    let arrays = read_npz(folder.join("rollout.npz")).unwrap();
+    let dataset = Dataset::open(&data).unwrap();
+    let (truth, _) = dataset.read_with_stats("test", 1).unwrap();
+    let (n, dim) = (truth.particles, truth.dim);
+    let predicted = array(&arrays, "predicted_position");
+    assert_eq!(predicted.shape, vec![8, n, dim]);
+    let true_position = array(&arrays, "true_position");
+    assert_eq!(true_position.shape, vec![8, n, dim]);
+    assert_eq!(
+        true_position.as_f32().unwrap(),
+        &truth.position[6 * n * dim..14 * n * dim],
+        "true_position holds frames 6..=13"
+    );
+    assert_eq!(array(&arrays, "start").as_i64().unwrap(), &[5]);
+    assert_eq!(
+        array(&arrays, "frame").as_i64().unwrap(),
+        &[6, 7, 8, 9, 10, 11, 12, 13]
+    );
+    let types = array(&arrays, "particle_type");
+    assert_eq!(types.as_i64().unwrap(), &truth.particle_type[..]);
+    let (p, t) = (predicted.as_f32().unwrap(), true_position.as_f32().unwrap());
+    assert!(p.iter().all(|x| x.is_finite()));
+    let obstacles: Vec<usize> = (0..n)
+        .filter(|&i| truth.particle_type[i] == OBSTACLE)
+        .collect();
+    assert!(!obstacles.is_empty(), "test scene 1 has obstacles");
+    for s in 0..8 {
+        for &i in &obstacles {
+            let k = (s * n + i) * dim;
+            assert_eq!(
+                &p[k..k + dim],
+                &t[k..k + dim],
+                "kinematic particle {i}, step {s}"
+            );
+        }
+    }
+    assert_ne!(p, t, "an untrained model predicts the truth");
+
+    let record = json(&folder.join("rollout.json"));
+    assert_eq!(record["complete"], true);
+    assert_eq!(record["reason"], serde_json::Value::Null);
+    assert_eq!(record["steps"], 8);
+    assert_eq!(
+        (record["start"].clone(), record["index"].clone()),
+        (5.into(), 1.into())
+    );
+    assert_eq!(record["kinematic_particles"], obstacles.len());
+    let expected = recomputed_mse(&arrays);
+    let mse: Vec<f64> = record["mse"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert_eq!(mse.len(), 8);
+    for (a, b) in mse.iter().zip(&expected) {
+        assert!((a - b).abs() <= 1e-12 * b.abs(), "MSE {a} recomputed {b}");
+    }
+    let mean = expected.iter().sum::<f64>() / 8.0;
+    let recorded_mean = record["mse_mean"].as_f64().unwrap();
+    assert!((recorded_mean - mean).abs() <= 1e-12 * mean);
+    assert!(
+        stdout.contains(&format!("mean         {mean:.6e}")),
+        "{stdout}"
+    );
+    // The compact table: the first, quartile and last steps.
+    assert!(
+        stdout.contains(&format!("      8     13  {:.6e}", expected[7])),
+        "{stdout}"
+    );
+    assert!(
+        !stdout.contains(&format!("{:.6e}", expected[2])),
+        "{stdout}"
+    );
+    // The start frame and steps 2, 4, 6, 8; the trailer closes the GIF.
+    assert_eq!(record["gif_pictures"], 5);
+    let gif = std::fs::read(folder.join("rollout.gif")).unwrap();
+    assert_eq!(&gif[..6], b"GIF89a");
+    assert_eq!(gif.last(), Some(&0x3B));
+
+    // Its own outputs are rewritten; --verbose prints every step.
+    let stdout = ok(rollout(
+        &model,
+        &data,
+        &out,
+        &["--index", "1", "--steps", "8", "--verbose"],
+    ));
+    for e in &expected {
+        assert!(stdout.contains(&format!("{e:.6e}")), "{stdout}");
+    }
+    // Another backend gives the same predictions to float tolerance.
+    let burn = dir.join("burn");
+    ok(rollout(
+        &model,
+        &data,
+        &burn,
+        &[
+            "--index",
+            "1",
+            "--steps",
+            "2",
+            "--backend",
+            "burn",
+            "--frame-every",
+            "0",
+        ],
+    ));
+    let other = read_npz(burn.join("test_1/rollout.npz")).unwrap();
+    let q = array(&other, "predicted_position");
+    assert_eq!(q.shape, vec![2, n, dim]);
+    let largest = q
+        .as_f32()
+        .unwrap()
+        .iter()
+        .zip(p)
+        .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+    assert!(largest < 1e-5, "burn and ndarray differ by {largest}");
+    assert!(!burn.join("test_1/rollout.gif").exists());
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_model_for_another_dimension_or_bounds_is_refused() {
+    let dir = scratch("rollout-mismatch");
+    let (plane, space, wide) = (dir.join("2d"), dir.join("3d"), dir.join("wide"));
+    tiny_dataset(&plane, 2, [0.1, 0.9], Variant::Obstacles);
+    tiny_dataset(&space, 3, [0.1, 0.9], Variant::Obstacles);
+    tiny_dataset(&wide, 2, [0.0, 1.0], Variant::Obstacles);
+    let (m2, m3) = (dir.join("m2"), dir.join("m3"));
+    ok(init(&plane, &m2, &[]));
+    ok(init(&space, &m3, &[]));
+    let out = dir.join("out");
+    let stderr = failed(rollout(&m3, &plane, &out, &[]));
+    assert!(
+        stderr.contains("metadata.json")
+            && stderr.contains("key 'dim'")
+            && stderr.contains("made for 3, the dataset has 2"),
+        "{stderr}"
+    );
+    let stderr = failed(rollout(&m2, &wide, &out, &[]));
+    assert!(
+        stderr.contains("key 'bounds'") && stderr.contains("[0.0, 1.0]"),
+        "{stderr}"
+    );
+    assert!(!out.exists(), "a refused rollout wrote {}", out.display());
+    // A 3D model on its own dataset rolls out (without a GIF: rendering is 2D).
+    let stdout = ok(rollout(&m3, &space, &out, &["--steps", "2"]));
+    assert!(!stdout.contains("rollout.gif"), "{stdout}");
+    assert_eq!(json(&out.join("test_0/rollout.json"))["complete"], true);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn rollout_refuses_foreign_outputs_and_missing_trajectories() {
+    let dir = scratch("rollout-refusals");
+    let data = dir.join("data");
+    tiny_dataset(&data, 2, [0.1, 0.9], Variant::Obstacles);
+    let model = dir.join("model");
+    ok(init(&data, &model, &[]));
+    let out = dir.join("out");
+    let stderr = failed(rollout(&model, &data, &out, &["--index", "2"]));
+    assert!(
+        stderr.contains("--index 2") && stderr.contains("split 'test' has 2 trajectories"),
+        "{stderr}"
+    );
+    let stderr = failed(rollout(&model, &data, &out, &["--split", "train"]));
+    assert!(stderr.contains("no split 'train'"), "{stderr}");
+    let stderr = failed(rollout(&model, &data, &out, &["--steps", "5"]));
+    assert!(
+        stderr.contains("--steps 5") && stderr.contains("frame 9"),
+        "{stderr}"
+    );
+    let stderr = failed(rollout(&model, &data, &out, &["--start", "4"]));
+    assert!(stderr.contains("--start 4"), "{stderr}");
+    assert!(!out.exists());
+
+    // Files it did not write, beside its own or in place of them, are refused and kept.
+    ok(rollout(&model, &data, &out, &["--all"]));
+    for i in 0..2 {
+        assert_eq!(
+            json(&out.join(format!("test_{i}/rollout.json")))["complete"],
+            true
+        );
+    }
+    std::fs::write(out.join("test_1/notes.txt"), "mine").unwrap();
+    let stderr = failed(rollout(&model, &data, &out, &["--all"]));
+    assert!(
+        stderr.contains("notes.txt") && stderr.contains("did not write"),
+        "{stderr}"
+    );
+    let foreign = dir.join("foreign");
+    std::fs::create_dir_all(foreign.join("test_0")).unwrap();
+    std::fs::write(foreign.join("test_0/rollout.npz"), "not ours").unwrap();
+    let stderr = failed(rollout(&model, &data, &foreign, &[]));
+    assert!(stderr.contains("did not write"), "{stderr}");
+    assert_eq!(
+        std::fs::read(foreign.join("test_0/rollout.npz")).unwrap(),
+        b"not ours"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_diverging_model_stops_with_the_frames_before() {
+    let dir = scratch("rollout-diverging");
+    let data = dir.join("data");
+    tiny_dataset(&data, 2, [0.1, 0.9], Variant::Obstacles);
+    let model = dir.join("model");
+    // Single dense layers, so that nothing between the overflow and the output is a ReLU (which
+    // may map NaN to 0, as f32::max does).
+    ok(init(&data, &model, &["--hidden-layers", "0"]));
+    // A decoder bias near the largest f32 throws the liquid ~1e35 units in the first step (still
+    // finite); the next step's velocities overflow the node encoder, whose weights are all 1e3.
+    let device = Default::default();
+    let gns = load_model::<NdArray>(&model, &device).unwrap();
+    let params = gns.params().map(|name, t| {
+        let fill = |v: f32| Tensor::from_vec(vec![v; t.numel()], &t.shape(), &device).unwrap();
+        match name {
+            "decoder.0.bias" => fill(3e38),
+            "encoder.node.0.weight" => fill(1e3),
+            _ => t.clone(),
+        }
+    });
+    save_model(&model, &gns.with_params(params).unwrap()).unwrap();
+
+    let out = dir.join("out");
+    let stderr = failed(rollout(&model, &data, &out, &["--checkpoint-every", "1"]));
+    assert!(
+        stderr.contains("rollout step 2 (frame 7)") && stderr.contains("non-finite"),
+        "{stderr}"
+    );
+    let folder = out.join("test_0");
+    let record = json(&folder.join("rollout.json"));
+    assert_eq!(record["complete"], false);
+    assert_eq!(record["failed_step"], 2);
+    assert_eq!(record["steps"], 1);
+    assert!(
+        record["reason"].as_str().unwrap().contains("step 2"),
+        "{record}"
+    );
+    let arrays = read_npz(folder.join("rollout.npz")).unwrap();
+    let predicted = array(&arrays, "predicted_position");
+    assert_eq!(predicted.shape, vec![1, 16, 2]);
+    assert!(predicted.as_f32().unwrap().iter().all(|x| x.is_finite()));
+    assert_eq!(array(&arrays, "frame").as_i64().unwrap(), &[6]);
+    assert_eq!(record["mse"].as_array().unwrap().len(), 1);
+    let gif = std::fs::read(folder.join("rollout.gif")).unwrap();
+    assert_eq!(gif.last(), Some(&0x3B), "the GIF is closed");
+    assert_eq!(record["gif_pictures"], 2);
+    let _ = std::fs::remove_dir_all(dir);
+}
