@@ -14,7 +14,18 @@ phi_core::backend_tests!(
     out_of_range_indices,
     shape_errors_name_both_shapes,
     operator_panics_name_the_shapes,
+    relu_keeps_nan,
 );
+
+/// A NaN through a ReLU stays NaN on every backend (as in PyTorch), so that a blown-up network
+/// output is seen by the checks after it instead of turning into a finite zero.
+fn relu_keeps_nan<B: Backend>() {
+    let x = tensor::<B>(&[4], &[f32::NAN, -1.0, 0.0, 2.0]);
+    let y = x.relu().to_vec();
+    assert!(y[0].is_nan(), "{}: relu(NaN) = {}", B::name(), y[0]);
+    assert_eq!(&y[1..], &[0.0, 0.0, 2.0], "{}", B::name());
+    assert!(phi_core::backend::relu(f32::NAN).is_nan());
+}
 
 fn broadcasting_corners<B: Backend>() {
     // Rank 1 against rank 3, and length-1 axes on both sides.

@@ -71,7 +71,7 @@ pub enum UnaryOp {
     Floor,
     /// `-1`, `0` or `1`
     Sign,
-    /// `max(x, 0)`
+    /// `max(x, 0)`; NaN stays NaN (as in PyTorch), so a blown-up value is not hidden
     Relu,
     /// `1 / x`
     Recip,
@@ -115,10 +115,17 @@ impl UnaryOp {
                     0.0
                 }
             }
-            UnaryOp::Relu => x.max(0.0),
+            UnaryOp::Relu => relu(x),
             UnaryOp::Recip => 1.0 / x,
         }
     }
+}
+
+/// `max(x, 0)` keeping NaN (`f32::max` would turn NaN into 0, which would hide a blown-up
+/// value from the checks downstream).
+#[inline]
+pub fn relu(x: f32) -> f32 {
+    if x < 0.0 { 0.0 } else { x }
 }
 
 /// An element-wise function of two float tensors (broadcasting). All are differentiable in both

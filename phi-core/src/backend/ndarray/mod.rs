@@ -188,7 +188,7 @@ impl Backend for NdArray {
             UnaryOp::Tanh => map(t, f32::tanh),
             UnaryOp::Floor => map(t, f32::floor),
             UnaryOp::Sign => map(t, |x| UnaryOp::Sign.apply(x)),
-            UnaryOp::Relu => map(t, |x| x.max(0.0)),
+            UnaryOp::Relu => map(t, super::relu),
             UnaryOp::Recip => map(t, |x| 1.0 / x),
         }
     }
