@@ -90,12 +90,16 @@ pub(crate) fn interaction_network<B: GnsKernels>(
         receivers: receivers.primitive().clone(),
     };
     let rest = dense_layers(params, &edge, 1..=hidden_layers);
-    let messages = Tensor::<B>::from_primitive(B::gns_edge_mlp(
+    let (messages, updated_edges) = B::gns_edge_update(
         edges.primitive().clone(),
         &input,
         &rest,
         Some(&layer_norm(params, &edge)),
-    )?);
+    )?;
+    let (messages, updated_edges) = (
+        Tensor::<B>::from_primitive(messages),
+        Tensor::<B>::from_primitive(updated_edges),
+    );
     let aggregated = Tensor::from_primitive(B::gns_sum_by_receiver(
         messages.primitive().clone(),
         receivers.primitive().clone(),
@@ -109,7 +113,7 @@ pub(crate) fn interaction_network<B: GnsKernels>(
         true,
         &node_input,
     )?;
-    Ok((nodes + node_update, edges + messages))
+    Ok((nodes + node_update, updated_edges))
 }
 
 /// The whole network: node features `[N, F]` and edge features `[E, dim + 1]` to the normalised

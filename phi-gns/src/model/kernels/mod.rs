@@ -144,6 +144,26 @@ pub trait GnsKernels: Backend {
         composite_edge_mlp::<Self>(edges, input, rest, norm)
     }
 
+    /// The edge update of an interaction network: `e′ =` [`GnsKernels::gns_edge_mlp`] and the
+    /// residual `e + e′`, returned as `(e′, e + e′)` (the messages are also summed onto the
+    /// receivers). A kernel may form both while a block of edges is in cache.
+    ///
+    /// # Errors
+    /// As [`GnsKernels::gns_edge_mlp`], and a shape error when `e′` is not of `e`'s shape.
+    fn gns_edge_update(
+        edges: Self::Float,
+        input: &EdgeInput<Self::Float, Self::Int>,
+        rest: &[Dense<Self::Float>],
+        norm: Option<&Norm<Self::Float>>,
+    ) -> Result<(Self::Float, Self::Float)> {
+        let messages = Self::gns_edge_mlp(edges.clone(), input, rest, norm)?;
+        let updated = Tensor::<Self>::from_primitive(edges).binary(
+            BinaryOp::Add,
+            &Tensor::<Self>::from_primitive(messages.clone()),
+        )?;
+        Ok((messages, updated.into_primitive()))
+    }
+
     /// The sum of edge values `[E, k]` over the incoming edges of each of `nodes` receivers:
     /// `[nodes, k]`, zero for a node without incoming edges. `receivers [E]` is ascending (the
     /// order of [`crate::graph::RadiusGraph`]); a kernel may rely on that.
