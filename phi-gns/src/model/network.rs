@@ -7,8 +7,7 @@ use phi_core::tensor::{IntTensor, Tensor};
 use super::kernels::{Dense, EdgeInput, Norm};
 use super::{GnsKernels, ModelError, Parameters};
 
-/// Layer norm's `eps`, PyTorch's and Sonnet's default.
-pub const LAYER_NORM_EPS: f32 = 1e-5;
+pub use super::kernels::LAYER_NORM_EPS;
 
 /// The dense layers `{prefix}.{i}` for `i` in `layers`.
 fn dense_layers<B: GnsKernels>(

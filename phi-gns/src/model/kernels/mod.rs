@@ -11,9 +11,10 @@ use phi_core::backend::{Backend, BinaryOp, ReduceOp};
 use phi_core::error::Result;
 use phi_core::tensor::{IntTensor, Tensor};
 
-use super::network::LAYER_NORM_EPS;
-
 mod ndarray;
+
+/// LayerNorm's `eps`, PyTorch's and Sonnet's default.
+pub const LAYER_NORM_EPS: f32 = 1e-5;
 
 /// A dense layer's parameters in PyTorch's convention: `weight [out, in]`, `bias [out]`.
 #[derive(Debug, Clone)]
@@ -116,7 +117,7 @@ pub trait GnsKernels: Backend {
     }
 
     /// An MLP: the dense `layers` with a ReLU between consecutive ones (none after the last),
-    /// then the LayerNorm `norm` (with [`LAYER_NORM_EPS`](crate::model::network::LAYER_NORM_EPS))
+    /// then the LayerNorm `norm` (with [`LAYER_NORM_EPS`])
     /// if given. `x [n, in]` → `[n, out]`.
     ///
     /// # Errors
@@ -212,15 +213,7 @@ pub fn composite_edge_mlp<B: GnsKernels>(
         input.receivers.clone(),
         !rest.is_empty(),
     )?;
-    let mut x = first;
-    for (i, layer) in rest.iter().enumerate() {
-        let relu = i + 1 < rest.len();
-        x = B::gns_linear(x, layer.weight.clone(), layer.bias.clone(), relu)?;
-    }
-    match norm {
-        Some(n) => B::gns_layer_norm(x, n.gamma.clone(), n.beta.clone(), LAYER_NORM_EPS),
-        None => Ok(x),
-    }
+    composite_mlp::<B>(first, rest, norm)
 }
 
 /// [`GnsKernels::gns_linear`] from primitives.

@@ -14,8 +14,7 @@ use phi_core::backend::ndarray::NdArray;
 use phi_core::error::{Result, TensorError};
 use rayon::prelude::*;
 
-use super::{Dense, EdgeInput, GnsKernels, Norm};
-use crate::model::network::LAYER_NORM_EPS;
+use super::{Dense, EdgeInput, GnsKernels, LAYER_NORM_EPS, Norm};
 
 /// Rows of one block: 256 rows of 128 `f32` are 128 KiB, so a block's input, hidden and output
 /// activations stay in L2 together with a layer's weights (64 KiB), and `gemm` packs each
