@@ -12,6 +12,7 @@ pub mod demo;
 pub mod gns;
 pub mod optimize;
 pub mod output;
+pub mod progress;
 pub mod simulate;
 
 pub use phi_core;

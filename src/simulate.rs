@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use indicatif::{ProgressBar, ProgressStyle};
+
 use phi_core::fields::LatticeKernels;
 use phi_flip::{Particles, Scene};
 use serde::Serialize;
@@ -134,19 +134,7 @@ pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> 
     };
     history.push(record(&particles));
 
-    let bar = if options.progress {
-        let bar = ProgressBar::new(steps as u64);
-        bar.set_style(
-            ProgressStyle::with_template(
-                "{spinner} {elapsed_precise} [{bar:40}] {pos}/{len} steps, {per_sec}, ETA {eta} {msg}",
-            )
-            .expect("a valid template")
-            .progress_chars("=> "),
-        );
-        bar
-    } else {
-        ProgressBar::hidden()
-    };
+    let bar = crate::progress::step_bar(steps, options.progress);
 
     let mut iterations_total = 0usize;
     let render = |step: usize,

@@ -24,7 +24,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressBar;
 use phi_gns::data::{Dataset, METADATA_FILE, Trajectory};
 use phi_gns::model::{Gns, GnsKernels, ModelError, load_model, read_spec};
 use phi_gns::rollout::{RolloutRange, rollout};
@@ -531,17 +531,8 @@ fn roll_one<B: GnsKernels>(
 
 /// A progress bar of `steps` steps on stderr when it is a terminal, else a hidden one.
 fn progress_bar(steps: usize, name: &str) -> ProgressBar {
-    if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
-        return ProgressBar::hidden();
-    }
-    let bar = ProgressBar::new(steps as u64);
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{spinner} {elapsed_precise} [{bar:40}] {pos}/{len} steps, {per_sec}, ETA {eta} {msg}",
-        )
-        .expect("a valid template")
-        .progress_chars("=> "),
-    );
+    let bar =
+        crate::progress::step_bar(steps, std::io::IsTerminal::is_terminal(&std::io::stderr()));
     bar.set_message(name.to_string());
     bar
 }

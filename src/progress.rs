@@ -1,0 +1,20 @@
+//! The progress bar of step-by-step runs (`phi simulate`, `phi rollout`).
+
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// A bar of `steps` steps on stderr, or a hidden one unless `show` (callers pass whether stderr
+/// is a terminal).
+pub fn step_bar(steps: usize, show: bool) -> ProgressBar {
+    if !show {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(steps as u64);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{spinner} {elapsed_precise} [{bar:40}] {pos}/{len} steps, {per_sec}, ETA {eta} {msg}",
+        )
+        .expect("a valid template")
+        .progress_chars("=> "),
+    );
+    bar
+}
