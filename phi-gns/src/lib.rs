@@ -6,6 +6,7 @@
 //!   self-edges included), batched with node offsets.
 //! - [`model`]: the network (features, encode-process-decode, integration), its parameters and
 //!   its model files, generic over the backend through [`model::GnsKernels`].
+//! - [`train`]: the random-walk input noise and the one-step loss of training.
 //! - [`rollout`]: a model run forward from ground-truth frames, kinematic particles following the
 //!   ground truth.
 
@@ -13,3 +14,4 @@ pub mod data;
 pub mod graph;
 pub mod model;
 pub mod rollout;
+pub mod train;

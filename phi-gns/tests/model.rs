@@ -20,3 +20,5 @@ mod pytorch;
 mod reference;
 #[path = "model/rollout.rs"]
 mod rollout;
+#[path = "model/training.rs"]
+mod training;

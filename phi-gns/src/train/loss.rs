@@ -1,0 +1,59 @@
+//! The one-step loss (thesis equation 5.1, DeepMind's training loss).
+
+use phi_core::backend::BinaryOp;
+use phi_core::tensor::Tensor;
+
+use crate::model::{Gns, GnsKernels, GraphBatch, ModelError};
+
+/// `1.0` for particles that count in the loss, `0.0` for kinematic ones: `[N]`.
+///
+/// # Errors
+/// Only tensor errors (none for a valid device).
+pub fn non_kinematic_mask<B: phi_core::Backend>(
+    particle_type: &[i64],
+    kinematic_types: &[i64],
+    device: &B::Device,
+) -> Result<Tensor<B>, ModelError> {
+    let mask = particle_type
+        .iter()
+        .map(|t| {
+            if kinematic_types.contains(t) {
+                0.0
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    Ok(Tensor::from_vec(mask, &[particle_type.len()], device)?)
+}
+
+/// The squared error between the predicted and the target normalised acceleration, summed over
+/// dimensions and averaged over the particles of `mask` (`[N]`, 1 where a particle counts): a
+/// one-element tensor, differentiable in the model's parameters and the batch's positions. The
+/// target is the acceleration that takes the window of `batch` to `next` (`[N, dim]`, with a
+/// noisy window: the adjusted next positions of
+/// [`RandomWalkNoise::adjust_target`](super::RandomWalkNoise::adjust_target)).
+///
+/// # Errors
+/// [`ModelError::Input`] when no particle counts (the mean would be 0/0), and shape errors.
+pub fn one_step_loss<B: GnsKernels>(
+    model: &Gns<B>,
+    batch: &GraphBatch<B>,
+    next: &Tensor<B>,
+    mask: &Tensor<B>,
+) -> Result<Tensor<B>, ModelError> {
+    let counted = mask.sum().to_scalar()?;
+    if counted <= 0.0 {
+        return Err(ModelError::Input {
+            what: "loss mask",
+            reason: "no particle of the batch counts in the loss (all are kinematic)".into(),
+        });
+    }
+    let predicted = model.normalised_acceleration(batch)?;
+    let target = model.target_acceleration(batch, next)?;
+    let per_particle = predicted
+        .binary(BinaryOp::Sub, &target)?
+        .square()
+        .sum_axis(1)?;
+    Ok(per_particle.binary(BinaryOp::Mul, mask)?.sum() / counted)
+}

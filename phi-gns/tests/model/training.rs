@@ -1,0 +1,230 @@
+//! The training noise and the one-step loss: the noise's statistics and its target adjustment,
+//! the loss against host arithmetic, its mask, and its gradient in the decoder's last bias
+//! against the closed form.
+
+use phi_core::{AutodiffBackend, Tensor};
+use phi_gns::data::OBSTACLE;
+use phi_gns::model::{Gns, GnsKernels, GraphBatch};
+use phi_gns::train::{non_kinematic_mask, one_step_loss, random_walk_noise};
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+
+use super::common::{Rng, config, liquid_over_obstacles, perturbed, spec};
+
+phi_core::backend_tests!(loss_is_the_masked_mean_of_squared_errors);
+mod gradient {
+    use super::loss_gradient_in_the_decoder_bias_is_the_mean_error;
+    phi_core::autodiff_backend_tests!(loss_gradient_in_the_decoder_bias_is_the_mean_error);
+}
+
+#[test]
+fn noise_is_a_random_walk_of_the_stated_std_at_the_last_velocity() {
+    let (n, window, dim, sigma) = (20_000, 6, 2, 6.7e-4);
+    let kinematic: Vec<bool> = (0..n).map(|i| i % 10 == 0).collect();
+    let noise = random_walk_noise(
+        &kinematic,
+        window,
+        dim,
+        sigma,
+        &mut StdRng::seed_from_u64(3),
+    );
+    let offsets = noise.offsets();
+    let at = |i: usize, t: usize, k: usize| f64::from(offsets[(i * window + t) * dim + k]);
+    let mut last = Vec::new();
+    let mut first = Vec::new();
+    for (i, &fixed) in kinematic.iter().enumerate() {
+        for k in 0..dim {
+            assert_eq!(at(i, 0, k), 0.0, "the first position is not moved");
+            if fixed {
+                for t in 0..window {
+                    assert_eq!(at(i, t, k), 0.0, "kinematic particle {i} got noise");
+                }
+            } else {
+                last.push(at(i, window - 1, k) - at(i, window - 2, k));
+                first.push(at(i, 1, k) - at(i, 0, k));
+            }
+        }
+    }
+    let std = |v: &[f64]| {
+        let mean = v.iter().sum::<f64>() / v.len() as f64;
+        (v.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / v.len() as f64).sqrt()
+    };
+    // 36,000 samples: the sample std is within ~0.4 % of the true one (1σ), so 3 % cannot fail
+    // by chance; a walk that did not accumulate would give σ/√5 at the last velocity.
+    let (last_std, first_std) = (std(&last), std(&first));
+    assert!(
+        (last_std / sigma - 1.0).abs() < 0.03,
+        "last velocity std {last_std}"
+    );
+    let per_step = sigma / 5f64.sqrt();
+    assert!(
+        (first_std / per_step - 1.0).abs() < 0.03,
+        "first velocity std {first_std}"
+    );
+    // The same seed draws the same noise; another seed other noise.
+    let again = random_walk_noise(
+        &kinematic,
+        window,
+        dim,
+        sigma,
+        &mut StdRng::seed_from_u64(3),
+    );
+    assert_eq!(again, noise);
+    let other = random_walk_noise(
+        &kinematic,
+        window,
+        dim,
+        sigma,
+        &mut StdRng::seed_from_u64(4),
+    );
+    assert_ne!(other, noise);
+    // No noise at σ = 0.
+    let none = random_walk_noise(&kinematic, window, dim, 0.0, &mut StdRng::seed_from_u64(3));
+    assert!(none.offsets().iter().all(|&x| x == 0.0));
+}
+
+#[test]
+fn the_target_moves_by_the_latest_positions_noise() {
+    let kinematic = [false, true, false];
+    let noise = random_walk_noise(&kinematic, 3, 2, 1e-2, &mut StdRng::seed_from_u64(9));
+    let next = [1.0f32, 2.0, 3.0, 4.0, 5.0, 6.0];
+    let adjusted = noise.adjust_target(&next);
+    let offsets = noise.offsets();
+    for i in 0..3 {
+        for k in 0..2 {
+            let last = offsets[(i * 3 + 2) * 2 + k];
+            assert_eq!(adjusted[i * 2 + k], next[i * 2 + k] + last);
+        }
+    }
+    assert_eq!(
+        &adjusted[2..4],
+        &next[2..4],
+        "the kinematic particle's target stays"
+    );
+    let window = vec![0.5f32; 3 * 3 * 2];
+    let noisy = noise.apply(&window);
+    assert!(noisy.iter().zip(offsets).all(|(p, o)| *p == 0.5 + o));
+}
+
+/// A small model on a block of liquid over obstacles, and a target window one frame on.
+struct Problem<B: GnsKernels> {
+    model: Gns<B>,
+    batch: GraphBatch<B>,
+    next: Vec<f32>,
+    types: Vec<i64>,
+}
+
+fn problem<B: GnsKernels>() -> Problem<B> {
+    let device = B::default_device();
+    let spec = spec(config(12, 10, 2, 2), 5);
+    let model = Gns::<B>::init(spec, &device).expect("a valid spec");
+    let params = perturbed(model.params(), 6);
+    let model = model.with_params(params).expect("the same layout");
+    let mut rng = Rng::new(21);
+    let scene = liquid_over_obstacles(&mut rng, 4, 3, 4, [0.4, 0.4], 6);
+    let batch = GraphBatch::<B>::from_host(&scene.window, &scene.types, model.spec(), &device)
+        .expect("a valid window");
+    let n = scene.particles();
+    let next: Vec<f32> = (0..n * 2)
+        .map(|i| {
+            let last = scene.window[(i / 2 * 6 + 5) * 2 + i % 2];
+            last + 1e-3 * (rng.uniform() as f32 - 0.5)
+        })
+        .collect();
+    Problem {
+        model,
+        batch,
+        next,
+        types: scene.types,
+    }
+}
+
+fn loss_is_the_masked_mean_of_squared_errors<B: GnsKernels>() {
+    let p = problem::<B>();
+    let device = B::default_device();
+    let n = p.types.len();
+    let next = Tensor::<B>::from_vec(p.next.clone(), &[n, 2], &device).unwrap();
+    let mask = non_kinematic_mask::<B>(&p.types, &[OBSTACLE], &device).unwrap();
+    let loss = one_step_loss(&p.model, &p.batch, &next, &mask).unwrap();
+    let predicted = p.model.normalised_acceleration(&p.batch).unwrap().to_vec();
+    let target = p
+        .model
+        .target_acceleration(&p.batch, &next)
+        .unwrap()
+        .to_vec();
+    let (mut sum, mut count) = (0.0f64, 0usize);
+    for i in (0..n).filter(|&i| p.types[i] != OBSTACLE) {
+        count += 1;
+        for k in 0..2 {
+            let d = f64::from(predicted[i * 2 + k]) - f64::from(target[i * 2 + k]);
+            sum += d * d;
+        }
+    }
+    let expected = sum / count as f64;
+    let got = f64::from(loss.to_scalar().unwrap());
+    assert!(
+        (got - expected).abs() <= 1e-5 * expected,
+        "{}: loss {got}, host {expected}",
+        B::name()
+    );
+    // Kinematic particles count for nothing: moving their targets leaves the loss as it is.
+    let mut moved = p.next.clone();
+    for i in (0..n).filter(|&i| p.types[i] == OBSTACLE) {
+        moved[i * 2] += 0.5;
+    }
+    let moved = Tensor::<B>::from_vec(moved, &[n, 2], &device).unwrap();
+    let same = one_step_loss(&p.model, &p.batch, &moved, &mask).unwrap();
+    assert_eq!(same.to_scalar().unwrap(), loss.to_scalar().unwrap());
+    // A prediction that is its own target has no loss (to the rounding of the round trip
+    // through positions).
+    let own = p.model.next_positions(&p.batch).unwrap();
+    let zero = f64::from(
+        one_step_loss(&p.model, &p.batch, &own, &mask)
+            .unwrap()
+            .to_scalar()
+            .unwrap(),
+    );
+    assert!(
+        zero < 1e-3 * expected,
+        "{}: own prediction loss {zero} vs {expected}",
+        B::name()
+    );
+    // A batch of only kinematic particles has no loss to average.
+    let none = Tensor::<B>::zeros(&[n], &device);
+    assert!(one_step_loss(&p.model, &p.batch, &next, &none).is_err());
+}
+
+fn loss_gradient_in_the_decoder_bias_is_the_mean_error<B: GnsKernels + AutodiffBackend>() {
+    let p = problem::<B>();
+    let device = B::default_device();
+    let n = p.types.len();
+    let leaves = p.model.params().map(|_, t| t.require_grad());
+    let model = p.model.with_params(leaves.clone()).unwrap();
+    let next = Tensor::<B>::from_vec(p.next.clone(), &[n, 2], &device).unwrap();
+    let mask = non_kinematic_mask::<B>(&p.types, &[OBSTACLE], &device).unwrap();
+    let predicted = model
+        .normalised_acceleration(&p.batch)
+        .unwrap()
+        .detach()
+        .to_vec();
+    let target = model.target_acceleration(&p.batch, &next).unwrap().to_vec();
+    let loss = one_step_loss(&model, &p.batch, &next, &mask).unwrap();
+    let bias = leaves.get("decoder.2.bias");
+    let gradient = loss.gradients(&[bias]).unwrap()[0].to_vec();
+    // The decoder's last bias adds to every particle's output, so ∂L/∂b_k is
+    // (2 / counted) Σ_i (predicted_ik − target_ik) over the counted particles.
+    let counted = p.types.iter().filter(|&&t| t != OBSTACLE).count() as f64;
+    for k in 0..2 {
+        let expected: f64 = (0..n)
+            .filter(|&i| p.types[i] != OBSTACLE)
+            .map(|i| 2.0 * (f64::from(predicted[i * 2 + k]) - f64::from(target[i * 2 + k])))
+            .sum::<f64>()
+            / counted;
+        let got = f64::from(gradient[k]);
+        assert!(
+            (got - expected).abs() <= 1e-5 * expected.abs().max(1e-3),
+            "{}: ∂L/∂b_{k} = {got}, closed form {expected}",
+            B::name()
+        );
+    }
+}
