@@ -1,0 +1,195 @@
+//! Adam (Kingma & Ba 2015) over the named parameters of a GNS, with DeepMind's learning-rate
+//! schedule.
+//!
+//! The update is PyTorch's `torch.optim.Adam` (the optimiser of geoelements/gns):
+//! `m ← β₁m + (1 − β₁)g`, `v ← β₂v + (1 − β₂)g²`, `p ← p − lr · m̂ / (√v̂ + ε)` with the bias
+//! corrections `m̂ = m / (1 − β₁ᵗ)`, `v̂ = v / (1 − β₂ᵗ)`. It runs on detached tensors of the
+//! parameters' backend, so no gradient history grows across steps.
+
+use phi_core::backend::{Backend, BinaryOp};
+use phi_core::tensor::Tensor;
+use serde::{Deserialize, Serialize};
+
+use crate::model::{ModelError, Parameters};
+
+/// DeepMind's learning rate: `(initial − final) · 0.1^(step / decay_steps) + final`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LearningRate {
+    /// The rate at step 0 (1e-4).
+    pub initial: f64,
+    /// The rate it decays towards (1e-6).
+    pub final_rate: f64,
+    /// Steps over which `initial − final` shrinks tenfold (5e6).
+    pub decay_steps: f64,
+}
+
+impl Default for LearningRate {
+    fn default() -> Self {
+        LearningRate {
+            initial: 1e-4,
+            final_rate: 1e-6,
+            decay_steps: 5e6,
+        }
+    }
+}
+
+impl LearningRate {
+    /// A constant rate.
+    pub fn constant(rate: f64) -> Self {
+        LearningRate {
+            initial: rate,
+            final_rate: rate,
+            decay_steps: 1.0,
+        }
+    }
+
+    /// The rate at `step` (counted from 0).
+    pub fn at(&self, step: u64) -> f64 {
+        (self.initial - self.final_rate) * 0.1f64.powf(step as f64 / self.decay_steps)
+            + self.final_rate
+    }
+}
+
+/// Adam's constants.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AdamConfig {
+    /// `β₁` (0.9).
+    pub beta1: f64,
+    /// `β₂` (0.999).
+    pub beta2: f64,
+    /// `ε` (1e-8).
+    pub eps: f64,
+    /// The learning rate per step.
+    pub learning_rate: LearningRate,
+}
+
+impl Default for AdamConfig {
+    fn default() -> Self {
+        AdamConfig {
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+            learning_rate: LearningRate::default(),
+        }
+    }
+}
+
+/// Adam's state: the step count and the two moment estimates per parameter.
+#[derive(Debug, Clone)]
+pub struct Adam<B: Backend> {
+    config: AdamConfig,
+    step: u64,
+    first: Parameters<B>,
+    second: Parameters<B>,
+}
+
+impl<B: Backend> Adam<B> {
+    /// Zero moments for `params`, at step 0.
+    pub fn new(config: AdamConfig, params: &Parameters<B>) -> Self {
+        let zeros = params.map(|_, t| t.detach().zeros_like());
+        Adam {
+            config,
+            step: 0,
+            first: zeros.clone(),
+            second: zeros,
+        }
+    }
+
+    /// The number of updates made.
+    pub fn step(&self) -> u64 {
+        self.step
+    }
+
+    /// The constants.
+    pub fn config(&self) -> &AdamConfig {
+        &self.config
+    }
+
+    /// The first and second moment estimates.
+    pub fn moments(&self) -> (&Parameters<B>, &Parameters<B>) {
+        (&self.first, &self.second)
+    }
+
+    /// One update: the new values of `params` (detached) from their `gradients` (one per
+    /// parameter, by name, as [`Parameters::iter`] orders them).
+    ///
+    /// # Errors
+    /// [`ModelError::Input`] when a gradient is missing or of another shape, or not finite
+    /// (the parameters and moments are then left as they were).
+    pub fn update(
+        &mut self,
+        params: &Parameters<B>,
+        gradients: &[Tensor<B>],
+    ) -> Result<Parameters<B>, ModelError> {
+        if gradients.len() != params.len() {
+            return Err(ModelError::Input {
+                what: "gradients",
+                reason: format!(
+                    "{} gradients for {} parameters",
+                    gradients.len(),
+                    params.len()
+                ),
+            });
+        }
+        for ((name, p), g) in params.iter().zip(gradients) {
+            if g.shape() != p.shape() {
+                return Err(ModelError::Input {
+                    what: "gradients",
+                    reason: format!(
+                        "'{name}': gradient {:?} for shape {:?}",
+                        g.shape(),
+                        p.shape()
+                    ),
+                });
+            }
+            if !g.host_values().iter().all(|x| x.is_finite()) {
+                return Err(ModelError::Input {
+                    what: "gradients",
+                    reason: format!("'{name}': a non-finite gradient"),
+                });
+            }
+        }
+        let c = self.config;
+        let t = self.step + 1;
+        let lr = c.learning_rate.at(self.step);
+        let first_correction = 1.0 - c.beta1.powf(t as f64);
+        let second_correction = 1.0 - c.beta2.powf(t as f64);
+        let mut index = 0;
+        let mut first = Vec::with_capacity(params.len());
+        let mut second = Vec::with_capacity(params.len());
+        let updated = params.map(|name, p| {
+            let g = gradients[index].detach();
+            index += 1;
+            let m = &self
+                .first
+                .get(name)
+                .binary_scalar(BinaryOp::Mul, c.beta1 as f32)
+                + &(&g * (1.0 - c.beta1) as f32);
+            let v = &self
+                .second
+                .get(name)
+                .binary_scalar(BinaryOp::Mul, c.beta2 as f32)
+                + &(g.square() * (1.0 - c.beta2) as f32);
+            let denominator = (&v * (1.0 / second_correction) as f32).sqrt() + c.eps as f32;
+            let step = (&m * (lr / first_correction) as f32)
+                .binary(BinaryOp::Div, &denominator)
+                .expect("moments have the parameter's shape");
+            first.push((name.to_string(), m));
+            second.push((name.to_string(), v));
+            p.detach()
+                .binary(BinaryOp::Sub, &step)
+                .expect("the update has the parameter's shape")
+        });
+        let (mut first, mut second) = (first.into_iter(), second.into_iter());
+        self.first = self
+            .first
+            .map(|_, _| first.next().expect("one per parameter").1);
+        self.second = self
+            .second
+            .map(|_, _| second.next().expect("one per parameter").1);
+        self.step = t;
+        Ok(updated)
+    }
+}
