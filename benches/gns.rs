@@ -19,6 +19,7 @@ use phi_flip::{RandomSceneParams, SceneVariant};
 use phi_gns::data::{Metadata, Trajectory, TrajectoryStats, read_trajectory, trajectory_file_name};
 use phi_gns::graph::RadiusGraph;
 use phi_gns::model::{Gns, GnsConfig, GnsKernels, GraphBatch, ModelSpec};
+use phi_gns::rollout::input_window;
 
 const INDEX: usize = 40;
 const FRAME: usize = 100;
@@ -61,24 +62,10 @@ fn spec(trajectory: &Trajectory) -> ModelSpec {
     ModelSpec::for_dataset(&metadata, GnsConfig::thesis(trajectory.dim), 0)
 }
 
-/// The window `[N, C + 1, dim]` ending at [`FRAME`].
-fn window(trajectory: &Trajectory, c: usize) -> Vec<f32> {
-    let (n, dim) = (trajectory.particles, trajectory.dim);
-    let mut window = vec![0.0; n * (c + 1) * dim];
-    for (t, frame) in (FRAME - c..=FRAME).enumerate() {
-        let positions = trajectory.frame(frame);
-        for i in 0..n {
-            let dst = (i * (c + 1) + t) * dim;
-            window[dst..dst + dim].copy_from_slice(&positions[i * dim..(i + 1) * dim]);
-        }
-    }
-    window
-}
-
 fn bench_backend<B: GnsKernels>(c: &mut Criterion, trajectory: &Trajectory) {
     let device = B::default_device();
     let model = Gns::<B>::init(spec(trajectory), &device).expect("a valid spec");
-    let window = window(trajectory, model.spec().config.input_velocities);
+    let window = input_window(trajectory, FRAME, model.spec().config.input_velocities);
     let types = &trajectory.particle_type;
     c.bench_with_input(BenchmarkId::new("gns step", B::name()), &(), |b, _| {
         b.iter(|| {

@@ -20,7 +20,7 @@ use clap::Parser;
 use phi::backends::BackendKind;
 use phi_gns::data::{Dataset, read_trajectory};
 use phi_gns::model::{Gns, GnsConfig, GnsKernels, GraphBatch, ModelSpec, save_model};
-use phi_gns::rollout::{RolloutRange, rollout};
+use phi_gns::rollout::{RolloutRange, input_window, rollout};
 use phi_io::npz::{NpyArray, write_npz};
 
 #[derive(Parser)]
@@ -90,14 +90,7 @@ fn run<B: GnsKernels>(args: &Args) -> Result<()> {
     let device = B::default_device();
     let model = Gns::<B>::init(spec, &device)?;
     let (n, dim) = (trajectory.particles, trajectory.dim);
-    let mut window = vec![0.0f32; n * (c + 1) * dim];
-    for (t, frame) in (args.frame - c..=args.frame).enumerate() {
-        let positions = trajectory.frame(frame);
-        for i in 0..n {
-            let dst = (i * (c + 1) + t) * dim;
-            window[dst..dst + dim].copy_from_slice(&positions[i * dim..(i + 1) * dim]);
-        }
-    }
+    let window = input_window(&trajectory, args.frame, c);
     let types = &trajectory.particle_type;
     let step = || -> Result<(usize, Vec<f32>)> {
         let batch = GraphBatch::<B>::from_host(&window, types, model.spec(), &device)?;

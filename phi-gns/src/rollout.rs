@@ -139,13 +139,28 @@ pub fn rollout_positions<B: GnsKernels>(
     Ok(frames)
 }
 
-/// `[N, C + 1, dim]` from `C + 1` frames `[N, dim]`, oldest first.
-fn fill_window(history: &[Vec<f32>], n: usize, dim: usize, window: &mut [f32]) {
+/// The model's input window `[N, C + 1, dim]` (row-major) of frames `frame − C ..= frame` of
+/// `trajectory`, for `C = input_velocities`.
+///
+/// # Panics
+/// If `frame < C` or `frame` is not a frame of the trajectory (check with
+/// [`RolloutRange::check`]).
+pub fn input_window(trajectory: &Trajectory, frame: usize, input_velocities: usize) -> Vec<f32> {
+    let frames: Vec<&[f32]> = (frame - input_velocities..=frame)
+        .map(|t| trajectory.frame(t))
+        .collect();
+    let mut window = vec![0.0; trajectory.particles * frames.len() * trajectory.dim];
+    fill_window(&frames, trajectory.particles, trajectory.dim, &mut window);
+    window
+}
+
+/// `window [N, C + 1, dim]` from `C + 1` frames `[N, dim]`, oldest first.
+fn fill_window<F: AsRef<[f32]>>(history: &[F], n: usize, dim: usize, window: &mut [f32]) {
     let frames = history.len();
     for i in 0..n {
         for (t, frame) in history.iter().enumerate() {
             let dst = (i * frames + t) * dim;
-            window[dst..dst + dim].copy_from_slice(&frame[i * dim..(i + 1) * dim]);
+            window[dst..dst + dim].copy_from_slice(&frame.as_ref()[i * dim..(i + 1) * dim]);
         }
     }
 }

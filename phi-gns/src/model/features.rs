@@ -48,6 +48,16 @@ pub(crate) fn latest_positions<B: Backend>(positions: &Tensor<B>) -> Result<Tens
         .reshape(&[shape[0], shape[2]])?)
 }
 
+/// The positions before the latest of a window `[N, C + 1, dim]`: `[N, dim]`.
+pub(crate) fn previous_positions<B: Backend>(
+    positions: &Tensor<B>,
+) -> Result<Tensor<B>, ModelError> {
+    let shape = positions.shape();
+    Ok(positions
+        .narrow(1, shape[1] - 2..shape[1] - 1)?
+        .reshape(&[shape[0], shape[2]])?)
+}
+
 /// Node features `[N, node_features]` of a batch (see the [module docs](self)).
 pub(crate) fn node_features<B: Backend>(
     batch: &GraphBatch<B>,
@@ -133,11 +143,8 @@ pub(crate) fn integrate<B: Backend>(
     positions: &Tensor<B>,
     acceleration: &Tensor<B>,
 ) -> Result<Tensor<B>, ModelError> {
-    let shape = positions.shape();
     let latest = latest_positions(positions)?;
-    let previous = positions
-        .narrow(1, shape[1] - 2..shape[1] - 1)?
-        .reshape(&[shape[0], shape[2]])?;
+    let previous = previous_positions(positions)?;
     let velocity = latest
         .binary(BinaryOp::Sub, &previous)?
         .binary(BinaryOp::Add, acceleration)?;

@@ -460,11 +460,8 @@ impl<B: GnsKernels> Gns<B> {
         next: &Tensor<B>,
     ) -> Result<Tensor<B>, ModelError> {
         let positions = batch.positions();
-        let shape = positions.shape();
         let latest = features::latest_positions(positions)?;
-        let previous = positions
-            .narrow(1, shape[1] - 2..shape[1] - 1)?
-            .reshape(&[shape[0], shape[2]])?;
+        let previous = features::previous_positions(positions)?;
         let acceleration =
             next.binary(phi_core::backend::BinaryOp::Sub, &(&latest * 2.0))? + previous;
         features::normalise_acceleration(&acceleration, &self.normalisers)

@@ -87,10 +87,7 @@ impl<'a> HostDense<'a> {
 
 /// `out += x Wᵀ` with `x [rows, k]`, `W [n, k]`, `out [rows, n]`, all row-major.
 fn accumulate_product(x: &[f32], rows: usize, k: usize, weight: &[f32], n: usize, out: &mut [f32]) {
-    if rows == 0 || n == 0 {
-        return;
-    }
-    if k == 0 {
+    if rows == 0 || n == 0 || k == 0 {
         return;
     }
     assert!(x.len() >= rows * k && weight.len() >= n * k && out.len() >= rows * n);
