@@ -1,5 +1,6 @@
-//! NumPy files for phi: `.npy` arrays ([`npy`]), `.npz` archives of them ([`npz`]), and the
-//! atomic writing they share ([`write_atomic`]).
+//! Files for phi: NumPy `.npy` arrays ([`npy`]), `.npz` archives of them ([`npz`]), the atomic
+//! writing they share ([`write_atomic`]), and TOML files read with errors that name the key
+//! ([`parse_toml`]).
 //!
 //! Every fallible function returns [`IoError`]; errors about a file name it, and a file that is
 //! damaged or cut short is reported as [`IoError::Corrupt`] ("corrupt or truncated"). Files that
@@ -15,9 +16,11 @@ mod atomic;
 mod error;
 pub mod npy;
 pub mod npz;
+mod toml_file;
 
 pub use atomic::{write_all, write_atomic};
 pub use error::IoError;
+pub use toml_file::{TomlError, parse_toml, read_toml_text};
 
 #[cfg(test)]
 pub(crate) mod test_util {
