@@ -566,4 +566,10 @@ fn device_transfer<B: Backend>() {
     let i = IntTensor::<B>::arange(3, &device).to_device(&device);
     assert_eq!(i.device(), device);
     assert_tensor("detach", &x.detach(), &[2], &[1.0, 2.0]);
+    // The command line's device names: `cpu` is the default device everywhere; a GPU that is
+    // not there, or a name no backend knows, is None rather than a panic.
+    assert_eq!(B::device_by_name("cpu"), Some(device));
+    for name in ["cuda:4096", "gpu", "cuda:x", ""] {
+        assert_eq!(B::device_by_name(name), None, "{name}");
+    }
 }

@@ -325,6 +325,11 @@ pub trait Backend: Copy + Clone + Debug + Default + Send + Sync + 'static {
     fn name() -> &'static str;
     /// The device tensors are created on when none is named: the CPU.
     fn default_device() -> Self::Device;
+    /// The device the command line names `name` (`cpu`; `cuda`, `cuda:N` where a backend has
+    /// GPUs), or `None` where this backend has no such device in this process.
+    fn device_by_name(name: &str) -> Option<Self::Device> {
+        (name == "cpu").then(Self::default_device)
+    }
     /// The device `tensor` lives on.
     fn float_device(tensor: &Self::Float) -> Self::Device;
     /// A copy of `tensor` on `device` (the same tensor if it is there already). Differentiable.

@@ -240,6 +240,16 @@ impl Backend for Tch {
         Device::Cpu
     }
 
+    fn device_by_name(name: &str) -> Option<Device> {
+        let ordinal = match name {
+            "cpu" => return Some(Device::Cpu),
+            "cuda" => 0,
+            _ => name.strip_prefix("cuda:")?.parse::<usize>().ok()?,
+        };
+        let devices = usize::try_from(tch::Cuda::device_count()).unwrap_or(0);
+        (ordinal < devices).then_some(Device::Cuda(ordinal))
+    }
+
     fn float_device(tensor: &TchTensor) -> Device {
         tensor.0.device()
     }
