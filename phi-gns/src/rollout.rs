@@ -139,6 +139,21 @@ pub fn rollout_positions<B: GnsKernels>(
     Ok(frames)
 }
 
+/// The position MSE of one frame: the mean of `(predicted − truth)²` over the particles that
+/// are not `kinematic` and the `dim` components (0 when every particle is kinematic), in f64.
+pub fn position_mse(predicted: &[f32], truth: &[f32], kinematic: &[bool], dim: usize) -> f64 {
+    let mut sum = 0.0f64;
+    let mut count = 0usize;
+    for (i, _) in kinematic.iter().enumerate().filter(|(_, k)| !**k) {
+        for a in i * dim..(i + 1) * dim {
+            let d = f64::from(predicted[a]) - f64::from(truth[a]);
+            sum += d * d;
+            count += 1;
+        }
+    }
+    if count == 0 { 0.0 } else { sum / count as f64 }
+}
+
 /// The model's input window `[N, C + 1, dim]` (row-major) of frames `frame − C ..= frame` of
 /// `trajectory`, for `C = input_velocities`.
 ///
@@ -155,7 +170,7 @@ pub fn input_window(trajectory: &Trajectory, frame: usize, input_velocities: usi
 }
 
 /// `window [N, C + 1, dim]` from `C + 1` frames `[N, dim]`, oldest first.
-fn fill_window<F: AsRef<[f32]>>(history: &[F], n: usize, dim: usize, window: &mut [f32]) {
+pub(crate) fn fill_window<F: AsRef<[f32]>>(history: &[F], n: usize, dim: usize, window: &mut [f32]) {
     let frames = history.len();
     for i in 0..n {
         for (t, frame) in history.iter().enumerate() {

@@ -27,7 +27,7 @@ use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
 use phi_gns::data::{Dataset, METADATA_FILE, Trajectory};
 use phi_gns::model::{Gns, GnsKernels, ModelError, load_model, read_spec};
-use phi_gns::rollout::{RolloutRange, rollout};
+use phi_gns::rollout::{RolloutRange, rollout, position_mse};
 use serde::{Deserialize, Serialize};
 
 use super::is_temporary_of;
@@ -153,21 +153,6 @@ pub struct RolloutRecord {
     pub wall_seconds: f64,
     /// Of which in the model (graph, network, integration), not writing files.
     pub model_seconds: f64,
-}
-
-/// The position MSE of one frame: the mean of `(predicted − truth)²` over the particles that
-/// are not `kinematic` and the `dim` components (0 when every particle is kinematic).
-pub fn position_mse(predicted: &[f32], truth: &[f32], kinematic: &[bool], dim: usize) -> f64 {
-    let mut sum = 0.0f64;
-    let mut count = 0usize;
-    for (i, _) in kinematic.iter().enumerate().filter(|(_, k)| !**k) {
-        for a in i * dim..(i + 1) * dim {
-            let d = f64::from(predicted[a]) - f64::from(truth[a]);
-            sum += d * d;
-            count += 1;
-        }
-    }
-    if count == 0 { 0.0 } else { sum / count as f64 }
 }
 
 /// The folder of trajectory `index` of `split` in the output directory: `<split>_<index>`.
