@@ -1,0 +1,9 @@
+//! Integration tests of the training data pipeline of `phi_gns::train`: per-step generators
+//! and the window sampler, with modules by topic.
+
+#[path = "train_data/common.rs"]
+mod common;
+#[path = "train_data/rng.rs"]
+mod rng;
+#[path = "train_data/sampler.rs"]
+mod sampler;
