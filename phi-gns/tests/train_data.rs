@@ -1,6 +1,8 @@
-//! Integration tests of the training data pipeline of `phi_gns::train`: per-step generators
-//! and the window sampler, with modules by topic.
+//! Integration tests of the training data pipeline of `phi_gns::train`: per-step generators,
+//! the window sampler and the trajectory cache, with modules by topic.
 
+#[path = "train_data/cache.rs"]
+mod cache;
 #[path = "train_data/common.rs"]
 mod common;
 #[path = "train_data/rng.rs"]

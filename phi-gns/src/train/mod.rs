@@ -3,9 +3,11 @@
 //! - [`noise`]: DeepMind's random-walk noise on the input positions, and the matching target;
 //! - [`adam`]: Adam over the named parameters, with DeepMind's learning-rate schedule;
 //! - [`loss`]: the one-step loss of equation 5.1 on normalised accelerations;
-//! - the data pipeline: [`rng`] (per-step generators) and [`sampler`] (windows).
+//! - the data pipeline: [`rng`] (per-step generators), [`sampler`] (windows) and [`cache`]
+//!   (trajectories).
 
 pub mod adam;
+pub mod cache;
 pub mod loss;
 pub mod noise;
 pub mod rng;

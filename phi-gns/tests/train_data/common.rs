@@ -56,6 +56,24 @@ pub fn write_dataset(dir: &Path, particles: &[usize], frames: usize) -> Vec<Traj
     trajectories
 }
 
+/// Flips bytes of the stored positions of `trajectory` in its file `path`, so that the
+/// member's CRC-32 no longer matches.
+pub fn damage(path: &Path, trajectory: &Trajectory) {
+    let mut bytes = std::fs::read(path).unwrap();
+    let first: Vec<u8> = trajectory.position[..4]
+        .iter()
+        .flat_map(|x| x.to_le_bytes())
+        .collect();
+    let at = bytes
+        .windows(first.len())
+        .position(|w| w == first)
+        .expect("the positions are stored uncompressed");
+    for b in &mut bytes[at..at + first.len()] {
+        *b = !*b;
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
 /// An upper bound of the chi-square statistic over `bins` equally likely bins that a correct
 /// sampler exceeds with probability below 1e-9 (Chernoff: `P(χ²_k ≥ x) ≤ (x/k · e^{1−x/k})^{k/2}`
 /// for `k = bins − 1` degrees of freedom), found by bisection.
