@@ -1,5 +1,5 @@
 //! Integration tests of the training data pipeline of `phi_gns::train`: per-step generators,
-//! the window sampler and the trajectory cache, with modules by topic.
+//! the window sampler, the trajectory cache and the batch stream, with modules by topic.
 
 #[path = "train_data/cache.rs"]
 mod cache;
@@ -9,3 +9,5 @@ mod common;
 mod rng;
 #[path = "train_data/sampler.rs"]
 mod sampler;
+#[path = "train_data/stream.rs"]
+mod stream;
