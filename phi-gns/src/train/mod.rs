@@ -2,15 +2,24 @@
 //!
 //! - [`noise`]: DeepMind's random-walk noise on the input positions, and the matching target;
 //! - [`adam`]: Adam over the named parameters, with DeepMind's learning-rate schedule;
-//! - [`loss`]: the one-step loss of equation 5.1 on normalised accelerations.
+//! - [`loss`]: the one-step loss of equation 5.1 on normalised accelerations;
+//! - the data pipeline: [`rng`] (per-step generators), [`sampler`] (windows), [`cache`]
+//!   (trajectories) and [`stream`] (batches read ahead on another thread).
 
 pub mod adam;
+pub mod cache;
 pub mod loss;
 pub mod noise;
+pub mod rng;
+pub mod sampler;
+pub mod stream;
 
 pub use adam::{Adam, AdamConfig, LearningRate};
 pub use loss::{non_kinematic_mask, one_step_loss};
 pub use noise::{RandomWalkNoise, random_walk_noise};
+pub use rng::{RngStream, step_rng};
+pub use sampler::{WindowRef, WindowSampler, WindowSpec};
+pub use stream::{BatchConfig, BatchSource, BatchStream, HostBatch, HostExample};
 
 use phi_core::AutodiffBackend;
 use phi_core::tensor::Tensor;
