@@ -6,7 +6,8 @@
 //!   self-edges included), batched with node offsets.
 //! - [`model`]: the network (features, encode-process-decode, integration), its parameters and
 //!   its model files, generic over the backend through [`model::GnsKernels`].
-//! - [`train`]: the random-walk input noise and the one-step loss of training.
+//! - [`train`]: the random-walk input noise, the one-step, multi-step and pushforward losses,
+//!   and Adam.
 //! - [`rollout`]: a model run forward from ground-truth frames, kinematic particles following the
 //!   ground truth.
 

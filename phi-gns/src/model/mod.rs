@@ -332,6 +332,60 @@ impl<B: phi_core::Backend> GraphBatch<B> {
             ..self.clone()
         })
     }
+
+    /// The same particles, types and examples with the window `positions` (`[N, C + 1, dim]`),
+    /// the radius graph rebuilt per example from its latest positions. The graph is built on
+    /// the host from the positions' values, so it carries no gradient; the positions keep
+    /// theirs.
+    ///
+    /// # Errors
+    /// [`ModelError::Input`] for another shape; [`ModelError::Graph`] for non-finite latest
+    /// positions.
+    pub fn regraph(&self, positions: Tensor<B>, spec: &ModelSpec) -> Result<Self, ModelError> {
+        if positions.shape() != self.positions.shape() {
+            return Err(ModelError::Input {
+                what: "positions",
+                reason: format!(
+                    "shape {:?} replaces {:?}",
+                    positions.shape(),
+                    self.positions.shape()
+                ),
+            });
+        }
+        let dim = spec.config.dim;
+        let latest = features::latest_positions(&positions)?.to_vec();
+        let examples: Vec<ExamplePositions<'_>> = self
+            .graph
+            .node_offsets()
+            .windows(2)
+            .map(|range| {
+                ExamplePositions::new(&latest[range[0] * dim..range[1] * dim], range[1] - range[0])
+            })
+            .collect();
+        let graph = RadiusGraph::for_batch(&examples, dim, spec.config.connectivity_radius)?;
+        Self::new(positions, self.particle_type.clone(), graph, spec)
+    }
+
+    /// The window one frame on: the oldest position of every particle dropped, `next`
+    /// (`[N, dim]`) appended as the latest, and the graph rebuilt from it
+    /// ([`GraphBatch::regraph`]). Gradients flow through `next` into the new window.
+    ///
+    /// # Errors
+    /// [`ModelError::Input`] when `next` is not `[N, dim]`; as [`GraphBatch::regraph`].
+    pub fn advance(&self, next: &Tensor<B>, spec: &ModelSpec) -> Result<Self, ModelError> {
+        let [n, window, dim] = self.positions.shape()[..] else {
+            unreachable!("GraphBatch keeps a rank-3 window")
+        };
+        if next.shape() != [n, dim] {
+            return Err(ModelError::Input {
+                what: "next positions",
+                reason: format!("shape {:?} for a window of [{n}, {window}, {dim}]", next.shape()),
+            });
+        }
+        let kept = self.positions.narrow(1, 1..window)?;
+        let positions = Tensor::concat(&[kept, next.unsqueeze(1)?], 1)?;
+        self.regraph(positions, spec)
+    }
 }
 
 /// A GNS: its `model.json` and its parameters on backend `B`.
@@ -446,7 +500,19 @@ impl<B: GnsKernels> Gns<B> {
     /// # Errors
     /// As [`Gns::normalised_acceleration`].
     pub fn next_positions(&self, batch: &GraphBatch<B>) -> Result<Tensor<B>, ModelError> {
-        features::integrate(batch.positions(), &self.acceleration(batch)?)
+        self.integrate(batch, &self.normalised_acceleration(batch)?)
+    }
+
+    /// The next positions `[N, dim]` from the window of `batch` and the network's output
+    /// `normalised` on it (what [`Gns::next_positions`] computes, for a caller that needs the
+    /// output too).
+    pub(crate) fn integrate(
+        &self,
+        batch: &GraphBatch<B>,
+        normalised: &Tensor<B>,
+    ) -> Result<Tensor<B>, ModelError> {
+        let acceleration = features::denormalise_acceleration(normalised, &self.normalisers)?;
+        features::integrate(batch.positions(), &acceleration)
     }
 
     /// The normalised acceleration that takes the window's latest positions to `next`
@@ -464,6 +530,15 @@ impl<B: GnsKernels> Gns<B> {
         let previous = features::previous_positions(positions)?;
         let acceleration =
             next.binary(phi_core::backend::BinaryOp::Sub, &(&latest * 2.0))? + previous;
-        features::normalise_acceleration(&acceleration, &self.normalisers)
+        self.normalise_acceleration(&acceleration)
+    }
+
+    /// An acceleration in stored units (`[N, dim]`) in the units of the network's output:
+    /// `(a − acc_mean) / acc_scale`.
+    ///
+    /// # Errors
+    /// Shape errors when `acceleration` is not `[N, dim]`.
+    pub fn normalise_acceleration(&self, acceleration: &Tensor<B>) -> Result<Tensor<B>, ModelError> {
+        features::normalise_acceleration(acceleration, &self.normalisers)
     }
 }

@@ -42,6 +42,40 @@ pub fn one_step_loss<B: GnsKernels>(
     next: &Tensor<B>,
     mask: &Tensor<B>,
 ) -> Result<Tensor<B>, ModelError> {
+    let target = model.target_acceleration(batch, next)?;
+    acceleration_loss(model, batch, &target, mask)
+}
+
+/// The loss of [`one_step_loss`] against a given normalised target acceleration `target`
+/// (`[N, dim]`, in the units of [`Gns::normalised_acceleration`]): the squared error summed
+/// over dimensions and averaged over the particles of `mask`.
+///
+/// # Errors
+/// [`ModelError::Input`] when no particle counts or `mask` is not `[N]`, and shape errors.
+pub fn acceleration_loss<B: GnsKernels>(
+    model: &Gns<B>,
+    batch: &GraphBatch<B>,
+    target: &Tensor<B>,
+    mask: &Tensor<B>,
+) -> Result<Tensor<B>, ModelError> {
+    let counted = counted_particles(batch, mask)?;
+    let predicted = model.normalised_acceleration(batch)?;
+    squared_error(&predicted, target, mask, counted)
+}
+
+/// The number of particles that count in the loss: the sum of `mask`, checked to be `[N]` and
+/// positive.
+pub(crate) fn counted_particles<B: phi_core::Backend>(
+    batch: &GraphBatch<B>,
+    mask: &Tensor<B>,
+) -> Result<f32, ModelError> {
+    let n = batch.positions().shape()[0];
+    if mask.shape() != [n] {
+        return Err(ModelError::Input {
+            what: "loss mask",
+            reason: format!("shape {:?} for {n} particles", mask.shape()),
+        });
+    }
     let counted = mask.sum().to_scalar()?;
     if counted <= 0.0 {
         return Err(ModelError::Input {
@@ -49,10 +83,18 @@ pub fn one_step_loss<B: GnsKernels>(
             reason: "no particle of the batch counts in the loss (all are kinematic)".into(),
         });
     }
-    let predicted = model.normalised_acceleration(batch)?;
-    let target = model.target_acceleration(batch, next)?;
+    Ok(counted)
+}
+
+/// `Σ_i mask_i Σ_a (predicted_ia − target_ia)² / counted`.
+pub(crate) fn squared_error<B: phi_core::Backend>(
+    predicted: &Tensor<B>,
+    target: &Tensor<B>,
+    mask: &Tensor<B>,
+    counted: f32,
+) -> Result<Tensor<B>, ModelError> {
     let per_particle = predicted
-        .binary(BinaryOp::Sub, &target)?
+        .binary(BinaryOp::Sub, target)?
         .square()
         .sum_axis(1)?;
     Ok(per_particle.binary(BinaryOp::Mul, mask)?.sum() / counted)

@@ -5,21 +5,30 @@
 //! - [`loss`]: the one-step loss of equation 5.1 on normalised accelerations;
 //! - the data pipeline: [`rng`] (per-step generators), [`sampler`] (windows), [`cache`]
 //!   (trajectories) and [`stream`] (batches read ahead on another thread).
+//! - [`multistep`]: the multi-step loss of equation 5.2, the model run on its own predictions;
+//! - [`pushforward`]: LagrangeBench's pushforward training, a one-step loss after unrolled
+//!   steps without gradient, and its schedule.
+//!
+//! [`train_step`] and [`train_step_with`] take one Adam step on a loss.
 
 pub mod adam;
 pub mod cache;
 pub mod loss;
+pub mod multistep;
 pub mod noise;
 pub mod rng;
 pub mod sampler;
 pub mod stream;
+pub mod pushforward;
 
 pub use adam::{Adam, AdamConfig, LearningRate};
-pub use loss::{non_kinematic_mask, one_step_loss};
+pub use loss::{acceleration_loss, non_kinematic_mask, one_step_loss};
+pub use multistep::multi_step_loss;
 pub use noise::{RandomWalkNoise, random_walk_noise};
 pub use rng::{RngStream, step_rng};
 pub use sampler::{WindowRef, WindowSampler, WindowSpec};
 pub use stream::{BatchConfig, BatchSource, BatchStream, HostBatch, HostExample};
+pub use pushforward::{Pushforward, push_forward, pushforward_loss};
 
 use phi_core::AutodiffBackend;
 use phi_core::tensor::Tensor;
@@ -31,8 +40,7 @@ use crate::model::{Gns, GnsKernels, GraphBatch, ModelError};
 /// Returns the updated model and the loss before the update.
 ///
 /// # Errors
-/// As [`one_step_loss`]; [`ModelError::Input`] for a non-finite loss or gradient (nothing is
-/// updated).
+/// As [`one_step_loss`] and [`train_step_with`].
 pub fn train_step<B: AutodiffBackend + GnsKernels>(
     model: &Gns<B>,
     adam: &mut Adam<B>,
@@ -40,14 +48,42 @@ pub fn train_step<B: AutodiffBackend + GnsKernels>(
     next: &Tensor<B>,
     mask: &Tensor<B>,
 ) -> Result<(Gns<B>, f32), ModelError> {
+    train_step_with(model, adam, |tracked| {
+        one_step_loss(tracked, batch, next, mask)
+    })
+}
+
+/// One optimisation step on any loss: `loss` is called with `model` whose parameters are
+/// trainable leaves and returns a one-element tensor ([`one_step_loss`], [`multi_step_loss`],
+/// [`pushforward_loss`], ...); its gradients in every parameter go to Adam's update. Returns the
+/// updated model and the loss before the update.
+///
+/// # Errors
+/// Whatever `loss` returns; [`ModelError::Input`] for a loss that is not one finite value or a
+/// non-finite gradient (nothing is updated).
+pub fn train_step_with<B, F>(
+    model: &Gns<B>,
+    adam: &mut Adam<B>,
+    loss: F,
+) -> Result<(Gns<B>, f32), ModelError>
+where
+    B: AutodiffBackend + GnsKernels,
+    F: FnOnce(&Gns<B>) -> Result<Tensor<B>, ModelError>,
+{
     let leaves = model.params().map(|_, t| t.require_grad());
     let tracked = model.with_params(leaves.clone())?;
-    let loss = one_step_loss(&tracked, batch, next, mask)?;
+    let loss = loss(&tracked)?;
+    if loss.numel() != 1 {
+        return Err(ModelError::Input {
+            what: "loss",
+            reason: format!("shape {:?}; a loss is one value", loss.shape()),
+        });
+    }
     let value = loss.to_scalar()?;
     if !value.is_finite() {
         return Err(ModelError::Input {
             what: "loss",
-            reason: format!("the one-step loss is {value}"),
+            reason: format!("the loss is {value}"),
         });
     }
     let wrt: Vec<&Tensor<B>> = leaves.iter().map(|(_, t)| t).collect();
