@@ -170,7 +170,12 @@ pub fn input_window(trajectory: &Trajectory, frame: usize, input_velocities: usi
 }
 
 /// `window [N, C + 1, dim]` from `C + 1` frames `[N, dim]`, oldest first.
-pub(crate) fn fill_window<F: AsRef<[f32]>>(history: &[F], n: usize, dim: usize, window: &mut [f32]) {
+pub(crate) fn fill_window<F: AsRef<[f32]>>(
+    history: &[F],
+    n: usize,
+    dim: usize,
+    window: &mut [f32],
+) {
     let frames = history.len();
     for i in 0..n {
         for (t, frame) in history.iter().enumerate() {

@@ -103,7 +103,10 @@ mod tests {
     fn errors_name_the_key_the_unknown_key_or_the_place() {
         let wrong_type = parse_toml::<Outer>("[training]\nsteps = \"many\"\n", "a.toml");
         let e = wrong_type.unwrap_err();
-        assert_eq!((e.path.as_str(), e.key.as_str()), ("a.toml", "training.steps"));
+        assert_eq!(
+            (e.path.as_str(), e.key.as_str()),
+            ("a.toml", "training.steps")
+        );
         let unknown = parse_toml::<Outer>("[training]\nsteps = 1\nstep = 2\n", "a.toml");
         let e = unknown.unwrap_err();
         assert!(e.reason.contains("unknown field `step`"), "{e}");

@@ -27,7 +27,7 @@ use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
 use phi_gns::data::{Dataset, METADATA_FILE, Trajectory};
 use phi_gns::model::{Gns, GnsKernels, ModelError, load_model, read_spec};
-use phi_gns::rollout::{RolloutRange, rollout, position_mse};
+use phi_gns::rollout::{RolloutRange, position_mse, rollout};
 use serde::{Deserialize, Serialize};
 
 use super::is_temporary_of;

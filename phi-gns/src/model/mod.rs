@@ -142,6 +142,14 @@ pub enum ModelError {
         /// What is wrong.
         reason: String,
     },
+    /// A NaN or infinite training loss or gradient: the update is not made.
+    #[error("{what}: {reason}")]
+    NonFinite {
+        /// `loss` or `gradients`.
+        what: &'static str,
+        /// The value, or the parameter whose gradient is not finite.
+        reason: String,
+    },
     /// A prediction with NaN or infinite positions: the rollout stops there.
     #[error(
         "rollout step {step} (frame {frame}): particle {particle} has a non-finite predicted position"
@@ -379,7 +387,10 @@ impl<B: phi_core::Backend> GraphBatch<B> {
         if next.shape() != [n, dim] {
             return Err(ModelError::Input {
                 what: "next positions",
-                reason: format!("shape {:?} for a window of [{n}, {window}, {dim}]", next.shape()),
+                reason: format!(
+                    "shape {:?} for a window of [{n}, {window}, {dim}]",
+                    next.shape()
+                ),
             });
         }
         let kept = self.positions.narrow(1, 1..window)?;
@@ -538,7 +549,10 @@ impl<B: GnsKernels> Gns<B> {
     ///
     /// # Errors
     /// Shape errors when `acceleration` is not `[N, dim]`.
-    pub fn normalise_acceleration(&self, acceleration: &Tensor<B>) -> Result<Tensor<B>, ModelError> {
+    pub fn normalise_acceleration(
+        &self,
+        acceleration: &Tensor<B>,
+    ) -> Result<Tensor<B>, ModelError> {
         features::normalise_acceleration(acceleration, &self.normalisers)
     }
 }

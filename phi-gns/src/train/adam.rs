@@ -97,6 +97,36 @@ impl<B: Backend> Adam<B> {
         }
     }
 
+    /// Adam's state as a checkpoint stored it: `step` updates made, and the two moment
+    /// estimates (of the parameters' layout).
+    ///
+    /// # Errors
+    /// [`ModelError::Input`] when the moments do not have the same names and shapes.
+    pub fn restore(
+        config: AdamConfig,
+        step: u64,
+        first: Parameters<B>,
+        second: Parameters<B>,
+    ) -> Result<Self, ModelError> {
+        let same = first.len() == second.len()
+            && first
+                .iter()
+                .zip(second.iter())
+                .all(|((a, x), (b, y))| a == b && x.shape() == y.shape());
+        if !same {
+            return Err(ModelError::Input {
+                what: "Adam moments",
+                reason: "the first and second moments have other names or shapes".into(),
+            });
+        }
+        Ok(Adam {
+            config,
+            step,
+            first,
+            second,
+        })
+    }
+
     /// The number of updates made.
     pub fn step(&self) -> u64 {
         self.step
@@ -116,8 +146,9 @@ impl<B: Backend> Adam<B> {
     /// parameter, by name, as [`Parameters::iter`] orders them).
     ///
     /// # Errors
-    /// [`ModelError::Input`] when a gradient is missing or of another shape, or not finite
-    /// (the parameters and moments are then left as they were).
+    /// [`ModelError::Input`] when a gradient is missing or of another shape,
+    /// [`ModelError::NonFinite`] when one is not finite (the parameters and moments are then left
+    /// as they were).
     pub fn update(
         &mut self,
         params: &Parameters<B>,
@@ -145,7 +176,7 @@ impl<B: Backend> Adam<B> {
                 });
             }
             if !g.host_values().iter().all(|x| x.is_finite()) {
-                return Err(ModelError::Input {
+                return Err(ModelError::NonFinite {
                     what: "gradients",
                     reason: format!("'{name}': a non-finite gradient"),
                 });
