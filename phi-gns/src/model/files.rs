@@ -47,11 +47,22 @@ pub fn weights_to_bytes<B: Backend>(
     params: &Parameters<B>,
     path: &Path,
 ) -> Result<Vec<u8>, ModelError> {
-    let data: Vec<(String, Vec<usize>, Vec<u8>)> = params
-        .iter()
+    tensors_to_bytes(params.iter().map(|(n, t)| (n.to_string(), t)), path)
+}
+
+/// The safetensors bytes of named `f32` tensors (little-endian, metadata `{"format": "pt"}`).
+///
+/// # Errors
+/// [`ModelError::File`] naming `path` if serialisation fails.
+pub fn tensors_to_bytes<'a, B: Backend>(
+    tensors: impl IntoIterator<Item = (String, &'a Tensor<B>)>,
+    path: &Path,
+) -> Result<Vec<u8>, ModelError> {
+    let data: Vec<(String, Vec<usize>, Vec<u8>)> = tensors
+        .into_iter()
         .map(|(name, t)| {
             let bytes = t.to_vec().iter().flat_map(|v| v.to_le_bytes()).collect();
-            (name.to_string(), t.shape(), bytes)
+            (name, t.shape(), bytes)
         })
         .collect();
     let views = data

@@ -9,26 +9,35 @@
 //! - [`pushforward`]: LagrangeBench's pushforward training, a one-step loss after unrolled
 //!   steps without gradient, and its schedule.
 //!
-//! [`train_step`] and [`train_step_with`] take one Adam step on a loss.
+//! [`train_step`] and [`train_step_with`] take one Adam step on a loss. A whole run, with its
+//! presets ([`config`]), checkpoints ([`checkpoint`]), screening on the validation split
+//! ([`screening`]) and files, is [`run::TrainingRun`]; `phi train` drives it.
 
 pub mod adam;
 pub mod cache;
+pub mod checkpoint;
+pub mod config;
+mod error;
 pub mod loss;
 pub mod multistep;
 pub mod noise;
-pub mod rng;
-pub mod sampler;
-pub mod stream;
 pub mod pushforward;
+pub mod rng;
+pub mod run;
+pub mod sampler;
+pub mod screening;
+pub mod stream;
 
 pub use adam::{Adam, AdamConfig, LearningRate};
+pub use config::TrainConfig;
+pub use error::TrainError;
 pub use loss::{acceleration_loss, non_kinematic_mask, one_step_loss};
 pub use multistep::multi_step_loss;
 pub use noise::{RandomWalkNoise, random_walk_noise};
+pub use pushforward::{Pushforward, push_forward, pushforward_loss};
 pub use rng::{RngStream, step_rng};
 pub use sampler::{WindowRef, WindowSampler, WindowSpec};
 pub use stream::{BatchConfig, BatchSource, BatchStream, HostBatch, HostExample};
-pub use pushforward::{Pushforward, push_forward, pushforward_loss};
 
 use phi_core::AutodiffBackend;
 use phi_core::tensor::Tensor;
@@ -59,8 +68,8 @@ pub fn train_step<B: AutodiffBackend + GnsKernels>(
 /// updated model and the loss before the update.
 ///
 /// # Errors
-/// Whatever `loss` returns; [`ModelError::Input`] for a loss that is not one finite value or a
-/// non-finite gradient (nothing is updated).
+/// Whatever `loss` returns; [`ModelError::Input`] for a loss that is not one value,
+/// [`ModelError::NonFinite`] for a NaN or infinite loss or gradient (nothing is updated).
 pub fn train_step_with<B, F>(
     model: &Gns<B>,
     adam: &mut Adam<B>,
@@ -81,7 +90,7 @@ where
     }
     let value = loss.to_scalar()?;
     if !value.is_finite() {
-        return Err(ModelError::Input {
+        return Err(ModelError::NonFinite {
             what: "loss",
             reason: format!("the loss is {value}"),
         });

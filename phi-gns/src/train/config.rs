@@ -1,0 +1,361 @@
+//! A training run's configuration: the TOML presets of `configs/gns/` (thesis section 5.3).
+//!
+//! Every hyperparameter is a key and every key is required, so that a preset states the whole
+//! run; unknown keys are errors naming the key. Sections:
+//!
+//! - `[model]`: the sizes of the GNS ([`GnsConfig`]; the dimension and the particle types come
+//!   from the dataset), the training noise σ and the seed of the initial weights;
+//! - `[training]`: total steps, batch size, the seed of the data and noise draws, the extra
+//!   steps `n` of the multi-step loss (eq. 5.2; 0 is the one-step loss of eq. 5.1), the
+//!   pushforward schedule (optional) and how often the loss is logged;
+//! - `[optimizer]`: Adam's constants and the learning-rate schedule ([`AdamConfig`]);
+//! - `[checkpoints]`: how often, and how many to keep;
+//! - `[screening]`: how often the validation split is screened, on how many trajectories, with
+//!   rollouts of how many steps, and which metric picks the best checkpoint;
+//! - `[data]`: the training split, the cache bound and the read-ahead depth.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::{AdamConfig, Pushforward, TrainError};
+use crate::data::{Metadata, Variant};
+use crate::model::{GnsConfig, ModelSpec};
+
+/// The content of a training preset.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainConfig {
+    /// One line on what the preset trains.
+    #[serde(default)]
+    pub description: String,
+    /// The network and its initial weights.
+    pub model: ModelSection,
+    /// The optimisation loop.
+    pub training: TrainingSection,
+    /// Adam and its learning-rate schedule.
+    pub optimizer: AdamConfig,
+    /// Checkpoints.
+    pub checkpoints: CheckpointSection,
+    /// Screening on the validation split.
+    pub screening: ScreeningSection,
+    /// Reading the training split.
+    pub data: DataSection,
+}
+
+/// `[model]`: the sizes of [`GnsConfig`] that a preset chooses.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelSection {
+    /// `C`, past velocities in the node features (5).
+    pub input_velocities: usize,
+    /// `R` in stored units; absent: the dataset's `default_connectivity_radius`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub connectivity_radius: Option<f64>,
+    /// Width of the node and edge latents (128).
+    pub latent_size: usize,
+    /// Width of the hidden layers (128).
+    pub hidden_size: usize,
+    /// Hidden layers per MLP (2).
+    pub hidden_layers: usize,
+    /// `M`, interaction-network steps (10).
+    pub message_passing_steps: usize,
+    /// Width of the particle-type embedding (16).
+    pub embedding_size: usize,
+    /// Distances to the domain bounds in the node features. They must agree with the dataset:
+    /// on for obstacles-only datasets, off for datasets whose walls are particles (`1snb`).
+    pub boundary_features: bool,
+    /// `σ` of the random-walk input noise (6.7e-4 for `1sn`, 0 for none).
+    pub noise_std: f64,
+    /// The seed of the initial weights.
+    pub seed: u64,
+}
+
+/// `[training]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainingSection {
+    /// The total number of optimisation steps (a resumed run ends at the same step).
+    pub steps: u64,
+    /// Graphs per batch (2).
+    pub batch_size: usize,
+    /// The seed of the window draws, the noise and the pushforward unrolls.
+    pub seed: u64,
+    /// `n` of equation 5.2: steps on the model's own predictions after the first (0: the
+    /// one-step loss; the thesis's 2ss and 2si use 1).
+    pub extra_steps: usize,
+    /// LagrangeBench's pushforward: unrolls without gradient before the loss (absent: none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pushforward: Option<Pushforward>,
+    /// A row of `train.csv` (the mean loss since the last row) every this many steps.
+    pub log_every: u64,
+}
+
+/// `[checkpoints]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CheckpointSection {
+    /// A checkpoint every this many steps (and at the end, and on SIGINT / SIGTERM).
+    pub every: u64,
+    /// The newest checkpoints kept (the best one is kept apart, in `best/`).
+    pub keep: usize,
+}
+
+/// The screening metric that picks the best checkpoint.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SelectBy {
+    /// The one-step acceleration error (MSE-acc 1).
+    MseAcc1,
+    /// The position error of the screening rollouts (the thesis picks by MSE 400: set
+    /// `rollout_steps` to the trajectory length for that).
+    RolloutMse,
+}
+
+/// `[screening]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScreeningSection {
+    /// Screen every this many steps (a multiple of `training.log_every`; 0: never).
+    pub every: u64,
+    /// The split screened ("valid").
+    pub split: String,
+    /// Its first this many trajectories (0: all).
+    pub trajectories: usize,
+    /// One-step windows every this many frames of each trajectory for MSE-acc 1.
+    pub window_stride: usize,
+    /// Steps of the rollout from the first full input window of each trajectory (at most
+    /// the trajectory's length minus `C`).
+    pub rollout_steps: usize,
+    /// The metric that picks the best checkpoint.
+    pub select_by: SelectBy,
+}
+
+/// `[data]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DataSection {
+    /// The split trained on ("train").
+    pub split: String,
+    /// Decoded trajectories kept in memory, in MiB (peak memory does not grow with the split).
+    pub cache_mib: usize,
+    /// Batches prepared ahead on another thread.
+    pub read_ahead: usize,
+}
+
+impl TrainConfig {
+    /// Reads and validates a preset; errors name the file and the key.
+    ///
+    /// # Errors
+    /// [`TrainError::Config`] for an unreadable file, a syntax error, an unknown key, a value
+    /// of the wrong type or out of range.
+    pub fn from_file(path: &Path) -> Result<Self, TrainError> {
+        let (text, name) = phi_io::read_toml_text(path)?;
+        Self::from_toml(&text, &name)
+    }
+
+    /// Parses and validates a preset from TOML text; `origin` names it in errors.
+    ///
+    /// # Errors
+    /// As [`TrainConfig::from_file`].
+    pub fn from_toml(text: &str, origin: &str) -> Result<Self, TrainError> {
+        let config: TrainConfig = phi_io::parse_toml(text, origin)?;
+        config.validate(origin)?;
+        Ok(config)
+    }
+
+    /// The preset as TOML text (what `phi train` stores beside its outputs).
+    ///
+    /// # Panics
+    /// Never: every value is representable in TOML.
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).expect("a training config is plain data")
+    }
+
+    /// Checks every value; `origin` names the file in errors.
+    ///
+    /// # Errors
+    /// [`TrainError::Config`] naming the key and the value.
+    pub fn validate(&self, origin: &str) -> Result<(), TrainError> {
+        let fail = |key: &str, reason: String| {
+            Err(TrainError::Config {
+                path: origin.to_string(),
+                key: key.to_string(),
+                reason,
+            })
+        };
+        let m = &self.model;
+        if !(m.noise_std.is_finite() && m.noise_std >= 0.0) {
+            return fail("model.noise_std", format!("{} is not ≥ 0", m.noise_std));
+        }
+        if let Some(r) = m.connectivity_radius
+            && !(r.is_finite() && r > 0.0)
+        {
+            return fail("model.connectivity_radius", format!("{r} is not > 0"));
+        }
+        let t = &self.training;
+        if t.steps == 0 {
+            return fail("training.steps", "0 steps train nothing".into());
+        }
+        if t.batch_size == 0 {
+            return fail(
+                "training.batch_size",
+                "a batch needs at least one graph".into(),
+            );
+        }
+        if t.log_every == 0 {
+            return fail("training.log_every", "must be ≥ 1".into());
+        }
+        if let Some(p) = &t.pushforward {
+            p.validate(Path::new(origin), "training.pushforward")
+                .map_err(|e| match e {
+                    crate::model::ModelError::Config { key, reason, .. } => TrainError::Config {
+                        path: origin.to_string(),
+                        key,
+                        reason,
+                    },
+                    other => TrainError::Model(other),
+                })?;
+            if t.extra_steps > 0 {
+                return fail(
+                    "training.pushforward",
+                    "pushforward and the multi-step loss (training.extra_steps > 0) do not \
+                     combine: choose one"
+                        .into(),
+                );
+            }
+        }
+        let o = &self.optimizer;
+        for (key, beta) in [("optimizer.beta1", o.beta1), ("optimizer.beta2", o.beta2)] {
+            if !(0.0..1.0).contains(&beta) {
+                return fail(key, format!("{beta} is not in [0, 1)"));
+            }
+        }
+        if !(o.eps.is_finite() && o.eps > 0.0) {
+            return fail("optimizer.eps", format!("{} is not > 0", o.eps));
+        }
+        let lr = &o.learning_rate;
+        for (key, value) in [
+            ("optimizer.learning_rate.initial", lr.initial),
+            ("optimizer.learning_rate.final_rate", lr.final_rate),
+            ("optimizer.learning_rate.decay_steps", lr.decay_steps),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return fail(key, format!("{value} is not > 0"));
+            }
+        }
+        if self.checkpoints.every == 0 {
+            return fail("checkpoints.every", "must be ≥ 1".into());
+        }
+        if self.checkpoints.keep == 0 {
+            return fail(
+                "checkpoints.keep",
+                "at least the newest checkpoint is kept (resume needs it)".into(),
+            );
+        }
+        let s = &self.screening;
+        if s.every > 0 && !s.every.is_multiple_of(t.log_every) {
+            return fail(
+                "screening.every",
+                format!(
+                    "{} is not a multiple of training.log_every = {}",
+                    s.every, t.log_every
+                ),
+            );
+        }
+        if s.every > 0 && s.window_stride == 0 {
+            return fail("screening.window_stride", "must be ≥ 1".into());
+        }
+        if s.every > 0 && s.rollout_steps == 0 {
+            return fail("screening.rollout_steps", "must be ≥ 1".into());
+        }
+        if self.data.read_ahead == 0 {
+            return fail("data.read_ahead", "must be ≥ 1".into());
+        }
+        Ok(())
+    }
+
+    /// The model this preset trains on a dataset: its sizes on top of the dataset's dimension,
+    /// bounds, statistics and particle types.
+    ///
+    /// # Errors
+    /// [`TrainError::Config`] when `model.boundary_features` does not fit the dataset's variant
+    /// (`origin` names the preset), or the sizes make no valid model (naming the key).
+    pub fn model_spec(
+        &self,
+        metadata: &Metadata,
+        metadata_path: &Path,
+        origin: &str,
+    ) -> Result<ModelSpec, TrainError> {
+        let m = &self.model;
+        let walls = metadata.variant == Variant::WallsAsParticles;
+        if m.boundary_features == walls {
+            return Err(TrainError::Config {
+                path: origin.to_string(),
+                key: "model.boundary_features".into(),
+                reason: format!(
+                    "{} does not fit the dataset '{}', whose variant is '{}': {}",
+                    m.boundary_features,
+                    metadata_path.display(),
+                    if walls { "walls" } else { "obstacles" },
+                    if walls {
+                        "its walls are particles, so the model needs no distances to them \
+                         (false, model 1snb)"
+                    } else {
+                        "its walls are not particles, so the model must be given the \
+                         distances to them (true)"
+                    }
+                ),
+            });
+        }
+        let config = GnsConfig {
+            dim: metadata.dim,
+            input_velocities: m.input_velocities,
+            connectivity_radius: m
+                .connectivity_radius
+                .unwrap_or(metadata.default_connectivity_radius),
+            latent_size: m.latent_size,
+            hidden_size: m.hidden_size,
+            hidden_layers: m.hidden_layers,
+            message_passing_steps: m.message_passing_steps,
+            particle_types: metadata.particle_types.len().max(1),
+            embedding_size: m.embedding_size,
+            boundary_features: m.boundary_features,
+            noise_std: m.noise_std,
+        };
+        let spec = ModelSpec::for_dataset(metadata, config, m.seed);
+        spec.validate(metadata_path).map_err(|e| match e {
+            crate::model::ModelError::Config { key, reason, .. } => {
+                match key.strip_prefix("config.") {
+                    Some(k) => TrainError::Config {
+                        path: origin.to_string(),
+                        key: format!("model.{k}"),
+                        reason,
+                    },
+                    None => TrainError::Model(crate::model::ModelError::Config {
+                        path: metadata_path.to_path_buf(),
+                        key,
+                        reason,
+                    }),
+                }
+            }
+            other => TrainError::Model(other),
+        })?;
+        Ok(spec)
+    }
+
+    /// Frames a training window needs after its latest input frame: the target of each of the
+    /// `1 + n` loss steps.
+    pub fn frames_after(&self) -> usize {
+        1 + self.training.extra_steps
+    }
+
+    /// Frames a training window needs before its first input frame: the longest pushforward
+    /// unroll.
+    pub fn frames_before(&self) -> usize {
+        self.training
+            .pushforward
+            .as_ref()
+            .map_or(0, Pushforward::max_unroll)
+    }
+}

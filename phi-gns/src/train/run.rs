@@ -1,0 +1,673 @@
+//! A training run: the loop of thesis section 5.3 with its files, checkpoints and screening.
+//!
+//! A run lives in a training directory:
+//!
+//! - `train.json`: what made it (`"made_by": "phi train"`), the dataset, the preset it came
+//!   from and the backend;
+//! - `config.toml`: the configuration as run (the preset with the command line's overrides);
+//! - `train.csv`: a row every `training.log_every` steps — `step`, the mean `loss` since the
+//!   previous row, the `learning_rate` of the row's step, `steps_per_second` (of the training
+//!   steps since the previous row, screening left out) — and, on
+//!   screening rows, `valid_mse_acc1` and `valid_rollout_mse`;
+//! - `checkpoints/step-…/`: the newest `checkpoints.keep` checkpoints ([`super::checkpoint`]);
+//! - `best/`: the model with the best screening metric so far.
+//!
+//! Each step `s` draws its windows, its noise and its pushforward unroll from generators that
+//! depend only on `(training.seed, s)`, so a run resumed from the checkpoint at step `s`
+//! ([`TrainingRun::open`] with `resume`) computes exactly the losses an uninterrupted run
+//! computes from `s` on, on the same backend and thread count; `train.csv` is cut back to the
+//! checkpoint's step first, so the curve it holds is that of one uninterrupted run.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use phi_core::AutodiffBackend;
+use phi_core::backend::Host;
+use phi_core::tensor::Tensor;
+use serde::{Deserialize, Serialize};
+
+use super::checkpoint::{
+    Best, CheckpointState, LossAccumulator, checkpoints, load_checkpoint, prune_checkpoints,
+    save_best, save_checkpoint,
+};
+use super::config::{SelectBy, TrainConfig};
+use super::rng::{RngStream, step_rng};
+use super::sampler::WindowSpec;
+use super::screening::{Screening, screen};
+use super::stream::{BatchConfig, BatchSource, BatchStream, HostBatch};
+use super::{
+    Adam, TrainError, multi_step_loss, non_kinematic_mask, pushforward_loss, random_walk_noise,
+    train_step_with,
+};
+use crate::data::{Dataset, METADATA_FILE, Trajectory, read_trajectory};
+use crate::model::{Gns, GnsKernels, GraphBatch, ModelError, load_model};
+
+/// The value of `made_by` in `train.json`.
+pub const MADE_BY: &str = "phi train";
+/// The run's description file.
+pub const TRAIN_FILE: &str = "train.json";
+/// The configuration as run.
+pub const CONFIG_FILE: &str = "config.toml";
+/// The loss and screening log.
+pub const LOG_FILE: &str = "train.csv";
+/// The header of [`LOG_FILE`].
+pub const LOG_HEADER: &str =
+    "step,loss,learning_rate,steps_per_second,valid_mse_acc1,valid_rollout_mse";
+
+/// `train.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainRecord {
+    /// Always [`MADE_BY`].
+    pub made_by: String,
+    /// The dataset directory.
+    pub dataset: PathBuf,
+    /// The preset the configuration came from.
+    pub preset: String,
+    /// The backend that trains (a resumed run must use the same for a bit-exact curve).
+    pub backend: String,
+    /// The model directory the weights started from (`--init-from`), if any.
+    pub init_from: Option<PathBuf>,
+}
+
+/// What a run is asked to do.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    /// The training directory.
+    pub out: PathBuf,
+    /// The dataset directory.
+    pub data: PathBuf,
+    /// The configuration (with overrides applied) and the name of the preset it came from.
+    pub config: TrainConfig,
+    /// The preset's path or name, for `train.json` and errors.
+    pub preset: String,
+    /// Start from the weights of this model directory (2si starts from a 1s model).
+    pub init_from: Option<PathBuf>,
+    /// Continue the run in `out` from its newest checkpoint.
+    pub resume: bool,
+}
+
+/// What one optimisation step did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepReport {
+    /// Steps done after it (counted from 1).
+    pub step: u64,
+    /// Its loss (before the update).
+    pub loss: f32,
+    /// Its learning rate.
+    pub learning_rate: f64,
+    /// The pushforward unrolls of its batch.
+    pub unrolls: usize,
+}
+
+/// A training run on backend `B`: the model, Adam, the batch stream and the files.
+pub struct TrainingRun<B: AutodiffBackend + GnsKernels> {
+    out: PathBuf,
+    config: TrainConfig,
+    model: Gns<B>,
+    adam: Adam<B>,
+    state: CheckpointState,
+    stream: BatchStream,
+    valid: Vec<Trajectory>,
+    device: B::Device,
+    log_started: Instant,
+    log_steps: u64,
+}
+
+impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
+    /// Opens a run: a fresh one in an empty or missing `options.out`, or, with
+    /// `options.resume`, the run there continued from its newest checkpoint.
+    ///
+    /// # Errors
+    /// [`TrainError::Checkpoint`] for an output directory that holds something else (a fresh
+    /// run never overwrites), a resumed run without a checkpoint or with another
+    /// configuration; [`TrainError::Config`] / [`TrainError::Model`] for a configuration that
+    /// does not fit the dataset; [`TrainError::Data`] for an unreadable dataset.
+    pub fn open(options: &RunOptions, device: &B::Device) -> Result<Self, TrainError> {
+        let out = &options.out;
+        let config = &options.config;
+        let dataset = Dataset::open(&options.data)?;
+        let metadata_path = options.data.join(METADATA_FILE);
+        let mut spec = config.model_spec(dataset.metadata(), &metadata_path, &options.preset)?;
+        spec.provenance = serde_json::json!({
+            "made_by": MADE_BY,
+            "phi_version": env!("CARGO_PKG_VERSION"),
+            "dataset": options.data.display().to_string(),
+            "preset": options.preset,
+            "init_from": options.init_from.as_ref().map(|p| p.display().to_string()),
+        });
+        if options.resume {
+            check_resumable(out, options, config, B::name())?;
+        } else {
+            check_fresh(out)?;
+        }
+        let (model, adam, state) = if options.resume {
+            let (step, dir) = checkpoints(out)?
+                .pop()
+                .ok_or_else(|| TrainError::Checkpoint {
+                    path: out.join(super::checkpoint::CHECKPOINTS_DIR),
+                    reason: "no checkpoint to resume from".into(),
+                })?;
+            let (model, adam, state) = load_checkpoint::<B>(&dir, config.optimizer, device)?;
+            if model.spec().config != spec.config {
+                return Err(TrainError::Checkpoint {
+                    path: dir,
+                    reason: "its model.json does not fit the configuration".into(),
+                });
+            }
+            tracing::info!(step, checkpoint = %dir.display(), "resuming");
+            truncate_log(&out.join(LOG_FILE), state.step)?;
+            (model, adam, state)
+        } else {
+            let model = match &options.init_from {
+                Some(dir) => start_from(dir, spec, device)?,
+                None => Gns::<B>::init(spec, device)?,
+            };
+            let adam = Adam::new(config.optimizer, model.params());
+            let state =
+                CheckpointState::new(0, config.training.seed, LossAccumulator::default(), None);
+            (model, adam, state)
+        };
+        let window = WindowSpec {
+            input_velocities: config.model.input_velocities,
+            span_before: config.frames_before(),
+            span_after: config.frames_after(),
+        };
+        let mut batches =
+            BatchConfig::new(config.training.seed, config.training.batch_size, window);
+        batches.cache_bytes = config.data.cache_mib << 20;
+        let source = BatchSource::new(&dataset, &config.data.split, &batches)?;
+        let stream = BatchStream::new(source, state.step, config.data.read_ahead)?;
+        let valid = if config.screening.every > 0 {
+            read_split(
+                &dataset,
+                &config.screening.split,
+                config.screening.trajectories,
+            )?
+        } else {
+            Vec::new()
+        };
+        if !options.resume {
+            // Only now that the dataset, both splits and the model are known to work.
+            write_run_files(out, options, B::name())?;
+        }
+        Ok(TrainingRun {
+            out: out.clone(),
+            config: config.clone(),
+            model,
+            adam,
+            state,
+            stream,
+            valid,
+            device: device.clone(),
+            log_started: Instant::now(),
+            log_steps: 0,
+        })
+    }
+
+    /// Optimisation steps done.
+    pub fn step(&self) -> u64 {
+        self.state.step
+    }
+
+    /// The model of the moment.
+    pub fn model(&self) -> &Gns<B> {
+        &self.model
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &TrainConfig {
+        &self.config
+    }
+
+    /// The best screening result so far.
+    pub fn best(&self) -> Option<Best> {
+        self.state.best
+    }
+
+    /// One optimisation step on the next batch, then the log row, the screening and the
+    /// checkpoint that fall due at the step.
+    ///
+    /// # Errors
+    /// [`TrainError::Diverged`] for a non-finite loss or gradient (the model and Adam stay as
+    /// they were before the step, and a checkpoint of that state is written); data, model and
+    /// file errors.
+    pub fn train_step(&mut self) -> Result<StepReport, TrainError> {
+        let batch = self.stream.next()?;
+        let step = self.state.step;
+        debug_assert_eq!(batch.step, step, "the stream runs in step with the run");
+        let learning_rate = self.config.optimizer.learning_rate.at(step);
+        let unrolls = self.config.training.pushforward.as_ref().map_or(0, |p| {
+            p.draw(
+                step,
+                &mut step_rng(self.config.training.seed, step, RngStream::Pushforward),
+            )
+        });
+        let inputs =
+            LossInputs::assemble(&self.model, &self.config, &batch, unrolls, &self.device)?;
+        let result = train_step_with(&self.model, &mut self.adam, |model| inputs.loss(model));
+        let (model, loss) = match result {
+            Ok(done) => done,
+            Err(ModelError::NonFinite { what, reason }) => {
+                let kept = self.checkpoint()?;
+                return Err(TrainError::Diverged {
+                    step: step + 1,
+                    reason: format!(
+                        "{what}: {reason}; the state before it is in {}",
+                        kept.display()
+                    ),
+                });
+            }
+            Err(e) => return Err(e.into()),
+        };
+        self.model = model;
+        self.state.step = step + 1;
+        self.state.log.add(loss);
+        self.log_steps += 1;
+        let done = self.state.step;
+        if done.is_multiple_of(self.config.training.log_every) {
+            let seconds = self.log_started.elapsed().as_secs_f64();
+            let rate = self.log_steps as f64 / seconds.max(1e-9);
+            let screening = (self.config.screening.every > 0
+                && done.is_multiple_of(self.config.screening.every))
+            .then(|| self.screen())
+            .transpose()?;
+            self.write_log_row(learning_rate, rate, screening)?;
+        }
+        if done.is_multiple_of(self.config.checkpoints.every) || done == self.config.training.steps
+        {
+            self.checkpoint()?;
+        }
+        Ok(StepReport {
+            step: done,
+            loss,
+            learning_rate,
+            unrolls,
+        })
+    }
+
+    /// Screens the model of the moment on the validation trajectories (on the host backend)
+    /// and keeps it as `best/` when it beats the best so far.
+    ///
+    /// # Errors
+    /// As [`screen`]; file errors writing `best/`.
+    pub fn screen(&mut self) -> Result<Screening, TrainError> {
+        let host = Gns::<Host>::new(
+            self.model.spec().clone(),
+            self.model.params().to_backend::<Host>(&Default::default()),
+        )?;
+        let s = &self.config.screening;
+        let result = screen(
+            &host,
+            &self.valid,
+            s.window_stride,
+            s.rollout_steps,
+            &Default::default(),
+        )?;
+        let (metric, value) = match s.select_by {
+            SelectBy::MseAcc1 => ("valid_mse_acc1", result.mse_acc1),
+            SelectBy::RolloutMse => ("valid_rollout_mse", result.rollout_mse),
+        };
+        tracing::info!(
+            step = self.state.step,
+            mse_acc1 = result.mse_acc1,
+            rollout_mse = result.rollout_mse,
+            "screening"
+        );
+        if value.is_finite() && self.state.best.is_none_or(|b| value < b.value) {
+            let best = Best {
+                step: self.state.step,
+                value,
+            };
+            save_best(&self.out, &self.model, &best, metric)?;
+            self.state.best = Some(best);
+        }
+        Ok(result)
+    }
+
+    /// Writes the checkpoint of the current step and prunes the old ones; returns its
+    /// directory.
+    ///
+    /// # Errors
+    /// File errors.
+    pub fn checkpoint(&mut self) -> Result<PathBuf, TrainError> {
+        let dir = save_checkpoint(&self.out, &self.model, &self.adam, &self.state)?;
+        prune_checkpoints(&self.out, self.config.checkpoints.keep)?;
+        tracing::debug!(step = self.state.step, dir = %dir.display(), "checkpoint");
+        Ok(dir)
+    }
+
+    fn write_log_row(
+        &mut self,
+        learning_rate: f64,
+        rate: f64,
+        screening: Option<Screening>,
+    ) -> Result<(), TrainError> {
+        self.log_started = Instant::now();
+        self.log_steps = 0;
+        let loss = self.state.log.take_mean();
+        let (acc, rollout) = screening.map_or((String::new(), String::new()), |s| {
+            (s.mse_acc1.to_string(), s.rollout_mse.to_string())
+        });
+        let row = format!(
+            "{},{loss},{learning_rate},{rate:.4},{acc},{rollout}\n",
+            self.state.step
+        );
+        append_log(&self.out.join(LOG_FILE), &row)
+    }
+}
+
+/// The host-side inputs of one step's loss, on the device.
+struct LossInputs<B: GnsKernels> {
+    batch: GraphBatch<B>,
+    next: Tensor<B>,
+    /// `[N, m, dim]`: the true frames the multi-step or pushforward loss reads (none for the
+    /// plain one-step loss).
+    truth: Option<Tensor<B>>,
+    mask: Tensor<B>,
+    pushforward: bool,
+}
+
+impl<B: GnsKernels> LossInputs<B> {
+    /// The windows of `batch` with the step's noise, the targets and the mask. With `unrolls`
+    /// pushforward steps, the start window ends `unrolls` frames before the latest input frame
+    /// `t` of the drawn window, and the truth holds frames `t − unrolls ..= t + 1`; with `n`
+    /// extra steps, frames `t ..= t + n + 1`.
+    fn assemble(
+        model: &Gns<B>,
+        config: &TrainConfig,
+        batch: &HostBatch,
+        unrolls: usize,
+        device: &B::Device,
+    ) -> Result<Self, ModelError> {
+        let c = config.model.input_velocities;
+        let n = config.training.extra_steps;
+        let sigma = config.model.noise_std;
+        let kinematic_types = &model.spec().kinematic_types;
+        let mut noise_rng = step_rng(config.training.seed, batch.step, RngStream::Noise);
+        let mut windows = Vec::with_capacity(batch.examples.len());
+        let (mut next, mut truth, mut types) = (Vec::new(), Vec::new(), Vec::new());
+        let truth_frames = if unrolls > 0 {
+            unrolls + 2
+        } else if n > 0 {
+            n + 2
+        } else {
+            0
+        };
+        for example in &batch.examples {
+            let (count, dim) = (example.particles, example.dim);
+            let start = example.frame - unrolls;
+            let frames: Vec<&[f32]> = (start - c..=start)
+                .map(|f| {
+                    example
+                        .positions_at(f)
+                        .expect("the sampler's window spans it")
+                })
+                .collect();
+            let mut window = vec![0.0f32; count * (c + 1) * dim];
+            crate::rollout::fill_window(&frames, count, dim, &mut window);
+            let kinematic: Vec<bool> = example
+                .particle_type
+                .iter()
+                .map(|t| kinematic_types.contains(t))
+                .collect();
+            let target = example
+                .positions_at(start + 1)
+                .expect("the sampler's window spans it");
+            if sigma > 0.0 {
+                let noise = random_walk_noise(&kinematic, c + 1, dim, sigma, &mut noise_rng);
+                window = noise.apply(&window);
+                next.extend(noise.adjust_target(target));
+            } else {
+                next.extend_from_slice(target);
+            }
+            if truth_frames > 0 {
+                let first = if unrolls > 0 { start } else { example.frame };
+                let rows: Vec<&[f32]> = (first..first + truth_frames)
+                    .map(|f| {
+                        example
+                            .positions_at(f)
+                            .expect("the sampler's window spans it")
+                    })
+                    .collect();
+                let mut block = vec![0.0f32; count * truth_frames * dim];
+                crate::rollout::fill_window(&rows, count, dim, &mut block);
+                truth.extend(block);
+            }
+            windows.push(window);
+            types.extend_from_slice(&example.particle_type);
+        }
+        let examples: Vec<(&[f32], &[i64])> = windows
+            .iter()
+            .zip(&batch.examples)
+            .map(|(w, e)| (w.as_slice(), e.particle_type.as_slice()))
+            .collect();
+        let graph = GraphBatch::from_host_batch(&examples, model.spec(), device)?;
+        let (particles, dim) = (types.len(), model.spec().config.dim);
+        let next = Tensor::from_vec(next, &[particles, dim], device)?;
+        let truth = (truth_frames > 0)
+            .then(|| Tensor::from_vec(truth, &[particles, truth_frames, dim], device))
+            .transpose()?;
+        let mask = non_kinematic_mask::<B>(&types, kinematic_types, device)?;
+        Ok(LossInputs {
+            batch: graph,
+            next,
+            truth,
+            mask,
+            pushforward: unrolls > 0,
+        })
+    }
+
+    fn loss(&self, model: &Gns<B>) -> Result<Tensor<B>, ModelError> {
+        match (&self.truth, self.pushforward) {
+            (None, _) => super::one_step_loss(model, &self.batch, &self.next, &self.mask),
+            (Some(truth), true) => {
+                pushforward_loss(model, &self.batch, &self.next, truth, &self.mask)
+            }
+            (Some(truth), false) => {
+                multi_step_loss(model, &self.batch, &self.next, truth, &self.mask)
+            }
+        }
+    }
+}
+
+/// The model of `dir` as the start of a run with `spec`: its weights, `spec`'s facts.
+fn start_from<B: GnsKernels>(
+    dir: &Path,
+    spec: crate::model::ModelSpec,
+    device: &B::Device,
+) -> Result<Gns<B>, TrainError> {
+    let init = load_model::<B>(dir, device)?;
+    let (a, b) = (&init.spec().config, &spec.config);
+    let differs = [
+        ("input_velocities", a.input_velocities != b.input_velocities),
+        ("latent_size", a.latent_size != b.latent_size),
+        ("hidden_size", a.hidden_size != b.hidden_size),
+        ("hidden_layers", a.hidden_layers != b.hidden_layers),
+        (
+            "message_passing_steps",
+            a.message_passing_steps != b.message_passing_steps,
+        ),
+        ("embedding_size", a.embedding_size != b.embedding_size),
+        (
+            "boundary_features",
+            a.boundary_features != b.boundary_features,
+        ),
+        ("particle_types", a.particle_types != b.particle_types),
+        ("dim", a.dim != b.dim),
+    ];
+    if let Some((key, _)) = differs.iter().find(|(_, d)| *d) {
+        return Err(TrainError::Checkpoint {
+            path: dir.join(crate::model::MODEL_FILE),
+            reason: format!(
+                "config.{key} differs from the configuration's model.{key}: --init-from needs a \
+                 model of the same sizes"
+            ),
+        });
+    }
+    Ok(Gns::new(spec, init.params().clone())?)
+}
+
+/// The first `limit` trajectories of `split` (all for 0).
+fn read_split(dataset: &Dataset, split: &str, limit: usize) -> Result<Vec<Trajectory>, TrainError> {
+    let len = dataset.split_len(split)?;
+    let count = if limit == 0 { len } else { limit.min(len) };
+    (0..count)
+        .map(|i| {
+            Ok(read_trajectory(&Dataset::trajectory_path(
+                dataset.dir(),
+                split,
+                i,
+            ))?)
+        })
+        .collect()
+}
+
+fn checkpoint_error(path: &Path, reason: impl std::fmt::Display) -> TrainError {
+    TrainError::Checkpoint {
+        path: path.to_path_buf(),
+        reason: reason.to_string(),
+    }
+}
+
+/// A fresh run needs `out` missing or empty.
+fn check_fresh(out: &Path) -> Result<(), TrainError> {
+    if !out.exists() {
+        return Ok(());
+    }
+    if !out.is_dir() {
+        return Err(checkpoint_error(out, "exists and is not a directory"));
+    }
+    let mut entries = std::fs::read_dir(out).map_err(|e| checkpoint_error(out, e))?;
+    if entries.next().is_none() {
+        return Ok(());
+    }
+    if out.join(TRAIN_FILE).is_file() {
+        return Err(checkpoint_error(
+            out,
+            "holds a training run already: pass --resume to continue it, or choose another --out",
+        ));
+    }
+    Err(checkpoint_error(
+        out,
+        "is not empty and holds no training run; refusing to write into it: choose another --out",
+    ))
+}
+
+/// A resumed run needs `out` to hold a run of `phi train` with the same configuration (the
+/// total step count aside), dataset and backend.
+fn check_resumable(
+    out: &Path,
+    options: &RunOptions,
+    config: &TrainConfig,
+    backend: &str,
+) -> Result<(), TrainError> {
+    let path = out.join(TRAIN_FILE);
+    let record: TrainRecord = read_record(&path)?;
+    if record.made_by != MADE_BY {
+        return Err(checkpoint_error(
+            &path,
+            format!("made_by is '{}', not '{MADE_BY}'", record.made_by),
+        ));
+    }
+    let stored_path = out.join(CONFIG_FILE);
+    let stored = TrainConfig::from_file(&stored_path)?;
+    let mut same_steps = config.clone();
+    same_steps.training.steps = stored.training.steps;
+    if same_steps != stored {
+        return Err(checkpoint_error(
+            &stored_path,
+            "the run was made with another configuration (only training.steps may change on \
+             --resume)",
+        ));
+    }
+    if record.backend != backend {
+        tracing::warn!(
+            stored = %record.backend,
+            given = backend,
+            "resuming on another backend: the loss curve will not match an uninterrupted run's bit for bit"
+        );
+    }
+    if record.dataset != options.data {
+        tracing::warn!(
+            stored = %record.dataset.display(),
+            given = %options.data.display(),
+            "resuming on a dataset path other than the run's"
+        );
+    }
+    if config.training.steps != stored.training.steps {
+        let text = config.to_toml();
+        phi_io::write_atomic(&stored_path, |w| {
+            phi_io::write_all(w, text.as_bytes(), &stored_path)
+        })?;
+    }
+    Ok(())
+}
+
+fn read_record(path: &Path) -> Result<TrainRecord, TrainError> {
+    let bytes =
+        std::fs::read(path).map_err(|e| checkpoint_error(path, format!("cannot read: {e}")))?;
+    serde_json::from_slice(&bytes).map_err(|e| checkpoint_error(path, e))
+}
+
+/// `train.json`, `config.toml` and the header of `train.csv` of a fresh run.
+fn write_run_files(out: &Path, options: &RunOptions, backend: &str) -> Result<(), TrainError> {
+    std::fs::create_dir_all(out)
+        .map_err(|e| checkpoint_error(out, format!("cannot create: {e}")))?;
+    let record = TrainRecord {
+        made_by: MADE_BY.to_string(),
+        dataset: options.data.clone(),
+        preset: options.preset.clone(),
+        backend: backend.to_string(),
+        init_from: options.init_from.clone(),
+    };
+    let path = out.join(TRAIN_FILE);
+    let json = serde_json::to_vec_pretty(&record).map_err(|e| checkpoint_error(&path, e))?;
+    phi_io::write_atomic(&path, |w| phi_io::write_all(w, &json, &path))?;
+    let path = out.join(CONFIG_FILE);
+    let text = options.config.to_toml();
+    phi_io::write_atomic(&path, |w| phi_io::write_all(w, text.as_bytes(), &path))?;
+    let path = out.join(LOG_FILE);
+    let header = format!("{LOG_HEADER}\n");
+    phi_io::write_atomic(&path, |w| phi_io::write_all(w, header.as_bytes(), &path))?;
+    Ok(())
+}
+
+/// Appends `row` to the log and flushes it.
+fn append_log(path: &Path, row: &str) -> Result<(), TrainError> {
+    let mut file = std::fs::OpenOptions::new()
+        .append(true)
+        .open(path)
+        .map_err(|e| checkpoint_error(path, format!("cannot open: {e}")))?;
+    file.write_all(row.as_bytes())
+        .and_then(|()| file.flush())
+        .map_err(|e| checkpoint_error(path, format!("cannot write: {e}")))
+}
+
+/// Cuts the log back to the rows of steps `≤ step` (and drops a row cut short by a kill).
+fn truncate_log(path: &Path, step: u64) -> Result<(), TrainError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| checkpoint_error(path, format!("cannot read: {e}")))?;
+    let mut kept = String::with_capacity(text.len());
+    for (i, line) in text.split_inclusive('\n').enumerate() {
+        if i == 0 {
+            if line.trim_end() != LOG_HEADER {
+                return Err(checkpoint_error(
+                    path,
+                    "not the log of phi train (another header)",
+                ));
+            }
+            kept.push_str(line);
+            continue;
+        }
+        let complete = line.ends_with('\n');
+        let row_step = line.split(',').next().and_then(|s| s.parse::<u64>().ok());
+        match row_step {
+            Some(s) if complete && s <= step => kept.push_str(line),
+            _ => {}
+        }
+    }
+    phi_io::write_atomic(path, |w| phi_io::write_all(w, kept.as_bytes(), path))?;
+    Ok(())
+}
