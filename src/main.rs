@@ -74,6 +74,9 @@ enum Command {
     /// Roll a GNS out on trajectories of a dataset: predictions, truth, per-frame MSE and a GIF
     /// of both side by side.
     Rollout(phi::gns::rollout::RolloutArgs),
+    /// Train a GNS on a dataset with a preset of configs/gns/ (1s, 1sn, 1snb, 2ss, 2si):
+    /// checkpoints, screening on the validation split, exact resume.
+    Train(phi::gns::train::TrainArgs),
 }
 
 fn main() -> Result<()> {
@@ -127,6 +130,7 @@ fn main() -> Result<()> {
         Command::Optimize(args) => phi::optimize::run(args),
         Command::Model { command } => phi::gns::init::run(command),
         Command::Rollout(args) => phi::gns::rollout::run(args),
+        Command::Train(args) => phi::gns::train::run(args),
     }
 }
 

@@ -1,10 +1,11 @@
-//! `phi model ...` and `phi rollout`: model directories of Graph Network-based Simulators and
+//! `phi model ...`, `phi rollout` and `phi train`: model directories of Graph Network-based Simulators and
 //! their rollouts on the trajectories of a dataset (thesis section 5.4, fig. 5.8).
 //!
 //! - [`init`]: `phi model init`, a model directory (`model.json`, `model.safetensors`) with
 //!   seeded random weights for a dataset;
 //! - [`rollout`]: `phi rollout`, a model run forward from ground-truth frames, with the
-//!   predictions, the truth, the per-frame position error and a GIF of both side by side.
+//!   predictions, the truth, the per-frame position error and a GIF of both side by side;
+//! - [`train`]: `phi train`, a model trained on a dataset with a preset of `configs/gns/`.
 //!
 //! The files are those of [`phi_gns::model`] and [`phi_gns::data`]; `docs/gns.md` describes
 //! them and the commands. Neither command overwrites files it did not write: each recognises
@@ -13,6 +14,7 @@
 
 pub mod init;
 pub mod rollout;
+pub mod train;
 
 use std::ffi::OsStr;
 

@@ -9,6 +9,7 @@ use phi::output::read_npz;
 mod dataset;
 mod optimize;
 mod rollout;
+mod train;
 
 fn phi() -> Command {
     Command::new(env!("CARGO_BIN_EXE_phi"))

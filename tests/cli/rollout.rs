@@ -28,11 +28,24 @@ const TINY: [&str; 6] = [
 /// falling with some jitter beside 4 static obstacle particles, in `dim` dimensions, every axis
 /// within `bounds`.
 fn tiny_dataset(dir: &Path, dim: usize, bounds: [f64; 2], variant: Variant) {
+    tiny_dataset_with(dir, dim, bounds, variant, &[("test", 2)], 10);
+}
+
+/// A hand-made dataset in `dir` with `splits` (name, trajectories) of `frames` frames each: 12
+/// liquid particles falling with some jitter beside 4 static obstacle particles, in `dim`
+/// dimensions, every axis within `bounds`; the statistics are those of all trajectories.
+pub(super) fn tiny_dataset_with(
+    dir: &Path,
+    dim: usize,
+    bounds: [f64; 2],
+    variant: Variant,
+    splits: &[(&str, usize)],
+    frames: usize,
+) {
     let mut metadata = Metadata::new(dim);
     metadata.bounds = vec![bounds; dim];
-    metadata.sequence_length = 9;
+    metadata.sequence_length = frames - 1;
     metadata.variant = variant;
-    metadata.splits.insert("test".into(), 2);
     let mut state = 0x2545_f491_4f6c_dd1du64;
     let mut jitter = move || {
         state = state
@@ -42,33 +55,37 @@ fn tiny_dataset(dir: &Path, dim: usize, bounds: [f64; 2], variant: Variant) {
     };
     let (lo, width) = (bounds[0] as f32, (bounds[1] - bounds[0]) as f32);
     let mut total = TrajectoryStats::new(dim);
-    std::fs::create_dir_all(dir.join("test")).unwrap();
-    for index in 0..2 {
-        let (liquid, obstacles) = (12, 4);
-        let mut types = vec![LIQUID; liquid];
-        types.extend([OBSTACLE; 4]);
-        let mut position = Vec::new();
-        for t in 0..10 {
-            let fall = 0.5e-3 * (t * t) as f32;
-            for i in 0..liquid {
-                for a in 0..dim {
-                    let grid = 0.01 * ((i >> (2 * a)) % 4) as f32;
-                    let down = if a == 1 { fall } else { 0.0 };
-                    position.push(lo + 0.5 * width + grid - down + jitter());
+    for &(split, count) in splits {
+        metadata.splits.insert(split.into(), count);
+        std::fs::create_dir_all(dir.join(split)).unwrap();
+        for index in 0..count {
+            let (liquid, obstacles) = (12, 4);
+            let mut types = vec![LIQUID; liquid];
+            types.extend([OBSTACLE; 4]);
+            let mut position = Vec::new();
+            for t in 0..frames {
+                let fall = 0.5e-3 * (t * t) as f32;
+                for i in 0..liquid {
+                    for a in 0..dim {
+                        let grid = 0.01 * ((i >> (2 * a)) % 4) as f32;
+                        let down = if a == 1 { fall } else { 0.0 };
+                        position.push(lo + 0.5 * width + grid - down + jitter());
+                    }
+                }
+                for j in 0..obstacles {
+                    for a in 0..dim {
+                        let row = if a == 0 { 0.01 * j as f32 } else { 0.0 };
+                        position.push(lo + 0.2 * width + row);
+                    }
                 }
             }
-            for j in 0..obstacles {
-                for a in 0..dim {
-                    let row = if a == 0 { 0.01 * j as f32 } else { 0.0 };
-                    position.push(lo + 0.2 * width + row);
-                }
-            }
+            let trajectory =
+                Trajectory::new(dim, position, types, 100 + index as u64, index).unwrap();
+            let stats = TrajectoryStats::of(&trajectory);
+            total.merge(&stats).unwrap();
+            let path = Dataset::trajectory_path(dir, split, index);
+            write_trajectory(&path, &trajectory, &stats).unwrap();
         }
-        let trajectory = Trajectory::new(dim, position, types, 100 + index as u64, index).unwrap();
-        let stats = TrajectoryStats::of(&trajectory);
-        total.merge(&stats).unwrap();
-        let path = Dataset::trajectory_path(dir, "test", index);
-        write_trajectory(&path, &trajectory, &stats).unwrap();
     }
     metadata.set_statistics(&total).unwrap();
     write_metadata(dir, &metadata).unwrap();

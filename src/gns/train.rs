@@ -1,0 +1,230 @@
+//! `phi train`: a GNS trained on a dataset with a preset of `configs/gns/` (thesis section 5.3).
+//!
+//! The run lives in `--out` (see [`phi_gns::train::run`] for its files). `--steps N` is the
+//! total step count, so a run resumed with the same `N` ends where an uninterrupted one would.
+//! SIGINT and SIGTERM end the current step, write a checkpoint and stop; `--resume` continues
+//! from the newest checkpoint, with the same loss curve as an uninterrupted run (same backend,
+//! same thread count).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use phi_core::AutodiffBackend;
+use phi_gns::model::GnsKernels;
+use phi_gns::train::TrainConfig;
+use phi_gns::train::run::{CONFIG_FILE, RunOptions, TRAIN_FILE, TrainRecord, TrainingRun};
+
+use crate::backends::BackendKind;
+
+/// `phi train --data DATASET --config PRESET --out DIR [options]`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct TrainArgs {
+    /// The dataset directory (with --resume: the run's, by default).
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// The preset (configs/gns/*.toml; with --resume: the run's config.toml, by default).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// The training directory.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// The backend; it must have autodiff.
+    #[arg(long, default_value = "burn")]
+    pub backend: BackendKind,
+    /// The device: cpu, or cuda / cuda:N on the tch backend.
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
+    /// The total number of steps (overrides training.steps).
+    #[arg(long)]
+    pub steps: Option<u64>,
+    /// Continue the run in --out from its newest checkpoint.
+    #[arg(long)]
+    pub resume: bool,
+    /// Start from the weights of this model directory (2si starts from a 1s model).
+    #[arg(long, conflicts_with = "resume")]
+    pub init_from: Option<PathBuf>,
+    /// Graphs per batch (overrides training.batch_size).
+    #[arg(long)]
+    pub batch_size: Option<usize>,
+    /// The seed of the data and noise draws (overrides training.seed).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// σ of the training noise (overrides model.noise_std).
+    #[arg(long)]
+    pub noise_std: Option<f64>,
+    /// Extra steps n of the multi-step loss (overrides training.extra_steps).
+    #[arg(long)]
+    pub extra_steps: Option<usize>,
+    /// A row of train.csv every this many steps (overrides training.log_every).
+    #[arg(long)]
+    pub log_every: Option<u64>,
+    /// A checkpoint every this many steps (overrides checkpoints.every).
+    #[arg(long)]
+    pub checkpoint_every: Option<u64>,
+    /// Screen the validation split every this many steps, 0 for never (overrides
+    /// screening.every).
+    #[arg(long)]
+    pub screen_every: Option<u64>,
+}
+
+/// The configuration, dataset and preset name of `args`.
+fn resolve(args: &TrainArgs) -> Result<(TrainConfig, PathBuf, String)> {
+    let (preset_path, stored_data) = if args.resume {
+        let record_path = args.out.join(TRAIN_FILE);
+        let bytes = std::fs::read(&record_path).with_context(|| {
+            format!(
+                "--resume: {} is not a training run (no readable {TRAIN_FILE})",
+                args.out.display()
+            )
+        })?;
+        let record: TrainRecord = serde_json::from_slice(&bytes)
+            .with_context(|| format!("'{}'", record_path.display()))?;
+        (
+            args.config
+                .clone()
+                .unwrap_or_else(|| args.out.join(CONFIG_FILE)),
+            Some(record.dataset),
+        )
+    } else {
+        let Some(config) = args.config.clone() else {
+            bail!("--config PRESET is needed for a new run (e.g. configs/gns/cpu/1sn.toml)");
+        };
+        (config, None)
+    };
+    let mut config = TrainConfig::from_file(&preset_path)?;
+    let t = &mut config.training;
+    if let Some(steps) = args.steps {
+        t.steps = steps;
+    }
+    if let Some(b) = args.batch_size {
+        t.batch_size = b;
+    }
+    if let Some(seed) = args.seed {
+        t.seed = seed;
+    }
+    if let Some(n) = args.extra_steps {
+        t.extra_steps = n;
+    }
+    if let Some(every) = args.log_every {
+        t.log_every = every;
+    }
+    if let Some(sigma) = args.noise_std {
+        config.model.noise_std = sigma;
+    }
+    if let Some(every) = args.checkpoint_every {
+        config.checkpoints.every = every;
+    }
+    if let Some(every) = args.screen_every {
+        config.screening.every = every;
+    }
+    let origin = format!(
+        "{} (with the command line's overrides)",
+        preset_path.display()
+    );
+    config.validate(&origin)?;
+    let data = match (&args.data, stored_data) {
+        (Some(data), _) => data.clone(),
+        (None, Some(stored)) => stored,
+        (None, None) => bail!("--data DATASET is needed for a new run"),
+    };
+    Ok((config, data, preset_path.display().to_string()))
+}
+
+/// Runs `phi train`.
+///
+/// # Errors
+/// Bad options or presets (naming the key), datasets the configuration does not fit, output
+/// directories that hold something else, a diverged run (naming the step), an interrupted run
+/// (after its checkpoint is written), I/O errors.
+pub fn run(args: TrainArgs) -> Result<()> {
+    let (config, data, preset) = resolve(&args)?;
+    let options = RunOptions {
+        out: args.out.clone(),
+        data,
+        config,
+        preset,
+        init_from: args.init_from.clone(),
+        resume: args.resume,
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = Arc::clone(&stop);
+    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+        .context("cannot install the SIGINT/SIGTERM handler")?;
+    let kind = args.backend;
+    crate::with_autodiff_backend!(kind, B => train::<B>(&options, &args.device, &stop),
+        otherwise => bail!("the {kind} backend has no autodiff and cannot train; use --backend burn or tch"))
+}
+
+fn train<B: AutodiffBackend + GnsKernels>(
+    options: &RunOptions,
+    device: &str,
+    stop: &AtomicBool,
+) -> Result<()> {
+    let Some(device) = B::device_by_name(device) else {
+        bail!(
+            "--device {device}: not available on the {} backend of this build (cpu{})",
+            B::name(),
+            if B::name() == "tch" {
+                ", or cuda / cuda:N where libtorch sees a CUDA device"
+            } else {
+                ""
+            }
+        );
+    };
+    let mut run = TrainingRun::<B>::open(options, &device)?;
+    let total = run.config().training.steps;
+    let first = run.step();
+    println!(
+        "{}: training {} on {} ({}), steps {first} → {total}, into {}",
+        options.preset,
+        run.config().description,
+        options.data.display(),
+        B::name(),
+        options.out.display()
+    );
+    let bar = crate::progress::step_bar(
+        usize::try_from(total).unwrap_or(usize::MAX),
+        std::io::IsTerminal::is_terminal(&std::io::stderr()),
+    );
+    bar.set_position(first);
+    let started = Instant::now();
+    while run.step() < total {
+        if stop.load(Ordering::SeqCst) {
+            let dir = run.checkpoint()?;
+            bar.abandon();
+            bail!(
+                "interrupted at step {}: checkpoint {}; continue with `phi train --resume --out {}`",
+                run.step(),
+                dir.display(),
+                options.out.display()
+            );
+        }
+        let report = run.train_step()?;
+        bar.set_position(report.step);
+        bar.set_message(format!(
+            "loss {:.4e}, lr {:.2e}",
+            report.loss, report.learning_rate
+        ));
+    }
+    bar.finish_and_clear();
+    let seconds = started.elapsed().as_secs_f64();
+    let steps = total - first;
+    println!(
+        "{steps} steps in {seconds:.1} s ({:.2} steps/s); best screening: {}",
+        steps as f64 / seconds.max(1e-9),
+        run.best().map_or("none".to_string(), |b| format!(
+            "{:.4e} at step {} ({}/best)",
+            b.value,
+            b.step,
+            options.out.display()
+        ))
+    );
+    println!(
+        "wrote {}/train.csv and checkpoints/step-{total:010}",
+        options.out.display()
+    );
+    Ok(())
+}
