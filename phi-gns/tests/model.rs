@@ -14,6 +14,8 @@ mod files;
 mod gradients;
 #[path = "model/kernels.rs"]
 mod kernels;
+#[path = "model/multistep.rs"]
+mod multistep;
 #[path = "model/optimise.rs"]
 mod optimise;
 #[path = "model/pytorch.rs"]

@@ -65,6 +65,57 @@ impl Scene {
     pub fn particles(&self) -> usize {
         self.types.len()
     }
+
+    /// The number of frames of the window.
+    pub fn frames(&self) -> usize {
+        self.window.len() / (self.particles() * 2)
+    }
+
+    /// The scene's true frames from its window's latest on: `[N, frames, 2]` row-major, frame 0
+    /// the window's latest. Each particle starts with its latest velocity; liquid falls by
+    /// 1e-4 per frame² and is slowed by a drag of 5% of its velocity per frame (so that the
+    /// accelerations differ between particles and follow from what the model sees), obstacles
+    /// move on uniformly.
+    pub fn future(&self, frames: usize) -> Vec<f32> {
+        let w = self.frames();
+        let mut future = Vec::with_capacity(self.particles() * frames * 2);
+        for (i, &t) in self.types.iter().enumerate() {
+            let at = |f: usize, a: usize| f64::from(self.window[(i * w + f) * 2 + a]);
+            let mut position = [at(w - 1, 0), at(w - 1, 1)];
+            let mut velocity = [position[0] - at(w - 2, 0), position[1] - at(w - 2, 1)];
+            for _ in 0..frames {
+                future.extend(position.iter().map(|&x| x as f32));
+                if t == LIQUID {
+                    velocity = [0.95 * velocity[0], 0.95 * velocity[1] - 1e-4];
+                }
+                for a in 0..2 {
+                    position[a] += velocity[a];
+                }
+            }
+        }
+        future
+    }
+}
+
+/// Frame `f` `[N, 2]` of frames `[N, F, 2]` (row-major).
+pub fn frame_of(frames: &[f32], particles: usize, f: usize) -> Vec<f32> {
+    let count = frames.len() / (particles * 2);
+    (0..particles)
+        .flat_map(|i| frames[(i * count + f) * 2..(i * count + f + 1) * 2].to_vec())
+        .collect()
+}
+
+/// The window `[N, C + 1, 2]` one frame on: each particle's oldest position dropped and its
+/// `next` (`[N, 2]`) appended.
+pub fn shifted_window(window: &[f32], next: &[f32]) -> Vec<f32> {
+    let particles = next.len() / 2;
+    let w = window.len() / (particles * 2);
+    (0..particles)
+        .flat_map(|i| {
+            let own = &window[i * w * 2..(i + 1) * w * 2];
+            own[2..].iter().chain(&next[i * 2..i * 2 + 2]).copied()
+        })
+        .collect()
 }
 
 /// A block of `nx × ny` liquid particles at spacing 0.01 (jittered by up to ±0.002) with its
