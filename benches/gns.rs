@@ -1,10 +1,15 @@
 //! GNS inference per backend on a dataset frame: one step (radius graph, forward pass,
 //! integration) with the thesis's sizes (10 message-passing steps, latent and hidden 128,
-//! embedding 16) and seeded random weights, the forward pass alone, and the radius graph alone.
+//! embedding 16) and seeded random weights, the forward pass alone, and the radius graph alone;
+//! and per autodiff backend one training step on a batch of two windows (the one-step loss, its
+//! gradients and Adam's update).
 //!
 //! The frame is frame 100 of training trajectory 40 of the dataset with seed 0 (1,069 particles,
 //! 1,008 of them liquid, ~27k edges at R = 0.03); the bench simulates that one trajectory first
-//! (a few seconds). Compare with geoelements/gns on the same input (docs/benchmarks.md).
+//! (a few seconds). The training batch is the windows ending at frames 99 and 98 of the same
+//! trajectory with frames 100 and 99 as targets (~54k edges), without noise so that every
+//! iteration sees the same graphs. Compare with geoelements/gns on the same input
+//! (docs/benchmarks.md).
 //!
 //! `cargo bench --bench gns --features tch -- --noplot`; single-threaded numbers with
 //! `RAYON_NUM_THREADS=1 OMP_NUM_THREADS=1`.
@@ -20,6 +25,7 @@ use phi_gns::data::{Metadata, Trajectory, TrajectoryStats, read_trajectory, traj
 use phi_gns::graph::RadiusGraph;
 use phi_gns::model::{Gns, GnsConfig, GnsKernels, GraphBatch, ModelSpec};
 use phi_gns::rollout::input_window;
+use phi_gns::train::{Adam, AdamConfig, non_kinematic_mask, train_step};
 
 const INDEX: usize = 40;
 const FRAME: usize = 100;
@@ -87,6 +93,41 @@ fn bench_backend<B: GnsKernels>(c: &mut Criterion, trajectory: &Trajectory) {
     });
 }
 
+fn bench_training<B: phi_core::AutodiffBackend + GnsKernels>(
+    c: &mut Criterion,
+    trajectory: &Trajectory,
+) {
+    let device = B::default_device();
+    let model = Gns::<B>::init(spec(trajectory), &device).expect("a valid spec");
+    let inputs = model.spec().config.input_velocities;
+    let windows = [FRAME - 1, FRAME - 2].map(|t| input_window(trajectory, t, inputs));
+    let types = &trajectory.particle_type;
+    let examples: Vec<(&[f32], &[i64])> = windows.iter().map(|w| (&w[..], &types[..])).collect();
+    let batch =
+        GraphBatch::<B>::from_host_batch(&examples, model.spec(), &device).expect("valid windows");
+    let next: Vec<f32> = [FRAME, FRAME - 1]
+        .iter()
+        .flat_map(|&t| trajectory.frame(t).iter().copied())
+        .collect();
+    let n = next.len() / trajectory.dim;
+    let next = phi_core::Tensor::from_vec(next, &[n, trajectory.dim], &device).expect("[N, dim]");
+    let all_types: Vec<i64> = types.iter().chain(types).copied().collect();
+    let mask = non_kinematic_mask::<B>(&all_types, &model.spec().kinematic_types, &device)
+        .expect("a mask");
+    let mut adam = Adam::new(AdamConfig::default(), model.params());
+    c.bench_with_input(
+        BenchmarkId::new("gns train step", B::name()),
+        &(),
+        |b, _| {
+            b.iter(|| {
+                let (updated, loss) =
+                    train_step(&model, &mut adam, &batch, &next, &mask).expect("a training step");
+                std::hint::black_box((updated, loss))
+            })
+        },
+    );
+}
+
 fn benches(c: &mut Criterion) {
     let trajectory = trajectory();
     let latest = trajectory.frame(FRAME).to_vec();
@@ -106,6 +147,7 @@ fn benches(c: &mut Criterion) {
         })
     });
     phi_core::for_each_backend!(B => bench_backend::<B>(c, &trajectory));
+    phi_core::for_each_autodiff_backend!(B => bench_training::<B>(c, &trajectory));
 }
 
 criterion_group! {

@@ -1,5 +1,6 @@
-//! The kernels of `GnsKernels` on every backend against host f64 arithmetic, and the split first
-//! layer of the edge MLP against the dense layer on the concatenation `[e, v_s, v_r]`: the tests
+//! The kernels of `GnsKernels` on every backend against host f64 arithmetic, the split first
+//! layer of the edge MLP against the dense layer on the concatenation `[e, v_s, v_r]`, and on
+//! the autodiff backends every kernel's gradients against those of its composite: the tests
 //! that a backend's fused overrides must pass.
 //!
 //! # Tolerances
@@ -10,9 +11,13 @@
 //! that bound. LayerNorm has no such simple bound: it is held to `1e-5` of the largest output,
 //! ten times the rounding of a mean, a variance and a square root of O(1) rows.
 
-use phi_core::{Backend, IntTensor, Tensor};
+use phi_core::error::Result;
+use phi_core::{AutodiffBackend, Backend, IntTensor, Tensor};
 use phi_gns::graph::RadiusGraph;
 use phi_gns::model::GnsKernels;
+use phi_gns::model::kernels::{
+    composite_edge_input_layer, composite_layer_norm, composite_linear, composite_sum_by_receiver,
+};
 
 use crate::common::{Rng, assert_close_f64};
 use crate::reference::{EPS, layer_norm};
@@ -24,6 +29,11 @@ phi_core::backend_tests!(
     sum_by_receiver_matches_the_host,
     kernels_take_zero_edges,
 );
+
+mod gradient {
+    use super::kernel_gradients_match_the_composites;
+    phi_core::autodiff_backend_tests!(kernel_gradients_match_the_composites);
+}
 
 /// The unit roundoff of f32.
 const U: f64 = 1.0 / (1u64 << 24) as f64;
@@ -399,4 +409,118 @@ fn kernels_take_zero_edges<B: GnsKernels>() {
         .unwrap(),
     );
     assert_eq!(normed.shape(), vec![0, latent]);
+}
+
+/// A kernel as a function of its float inputs.
+type Kernel<'a, B> = &'a dyn Fn(&[<B as Backend>::Float]) -> Result<<B as Backend>::Float>;
+
+/// The values of `fused` and `composite` on `inputs`, and the gradients in every input of
+/// `L = Σ c ⊙ output` for a seeded random `c`, agree to `1e-4` of their largest entry: the
+/// fused kernel's backward pass is its composite's (f32 sums in other orders: measured ~1e-6).
+fn assert_same_gradients<B: AutodiffBackend + GnsKernels>(
+    inputs: &[Tensor<B>],
+    fused: impl Fn(&[B::Float]) -> Result<B::Float>,
+    composite: impl Fn(&[B::Float]) -> Result<B::Float>,
+    what: &str,
+) {
+    let run = |f: Kernel<'_, B>, c: Option<&Tensor<B>>| {
+        let leaves: Vec<Tensor<B>> = inputs.iter().map(|t| t.require_grad()).collect();
+        let primitives: Vec<B::Float> = leaves.iter().map(|t| t.primitive().clone()).collect();
+        let y = Tensor::<B>::from_primitive(f(&primitives).unwrap());
+        let c = match c {
+            Some(c) => c.clone(),
+            None => {
+                let mut rng = Rng::new(17);
+                let values = uniform(&mut rng, y.numel(), -1.0, 1.0);
+                tensor::<B>(&values, &y.shape())
+            }
+        };
+        let loss = y
+            .binary(phi_core::backend::BinaryOp::Mul, &c)
+            .unwrap()
+            .sum();
+        let wrt: Vec<&Tensor<B>> = leaves.iter().collect();
+        (y.detach(), loss.gradients(&wrt).unwrap(), c)
+    };
+    let (y, grads, c) = run(&fused, None);
+    let (y0, grads0, _) = run(&composite, Some(&c));
+    let as_f64 = |t: &Tensor<B>| t.to_vec().into_iter().map(f64::from).collect::<Vec<_>>();
+    let name = B::name();
+    assert_close_f64(
+        &as_f64(&y),
+        &as_f64(&y0),
+        1e-4,
+        &format!("{name} {what}: value"),
+    );
+    for (i, (g, g0)) in grads.iter().zip(&grads0).enumerate() {
+        assert_eq!(g.shape(), g0.shape(), "{name} {what}: gradient {i} shape");
+        let what = format!("{name} {what}: gradient in input {i}");
+        assert_close_f64(&as_f64(g), &as_f64(g0), 1e-4, &what);
+    }
+}
+
+fn kernel_gradients_match_the_composites<B: AutodiffBackend + GnsKernels>() {
+    let mut rng = Rng::new(5);
+    let mut input = |shape: &[usize], low: f64, high: f64| {
+        let n = shape.iter().product();
+        tensor::<B>(&uniform(&mut rng, n, low, high), shape)
+    };
+    // More rows than one task of a kernel's backward pass (its partial sums are added).
+    let (rows, k, out) = (2500, 12, 10);
+    let x = input(&[rows, k], -2.0, 2.0);
+    let w = input(&[out, k], -0.5, 0.5);
+    let b = input(&[out], -0.5, 0.5);
+    for relu in [false, true] {
+        assert_same_gradients(
+            &[x.clone(), w.clone(), b.clone()],
+            |t| B::gns_linear(t[0].clone(), t[1].clone(), t[2].clone(), relu),
+            |t| composite_linear::<B>(t[0].clone(), t[1].clone(), t[2].clone(), relu),
+            &format!("linear, relu {relu}"),
+        );
+    }
+    let gamma = input(&[k], 0.5, 1.5);
+    let beta = input(&[k], -0.5, 0.5);
+    assert_same_gradients(
+        &[x.clone(), gamma, beta],
+        |t| B::gns_layer_norm(t[0].clone(), t[1].clone(), t[2].clone(), EPS as f32),
+        |t| composite_layer_norm::<B>(t[0].clone(), t[1].clone(), t[2].clone(), EPS as f32),
+        "layer norm",
+    );
+    let (senders, receivers, nodes) = large_graph();
+    let edges = senders.len();
+    let e = input(&[edges, k], -1.0, 1.0);
+    let p_s = input(&[nodes, out], -1.0, 1.0);
+    let p_r = input(&[nodes, out], -1.0, 1.0);
+    let (s, r) = (indices::<B>(&senders), indices::<B>(&receivers));
+    for relu in [false, true] {
+        let layer = |t: &[B::Float], composite: bool| {
+            let f = if composite {
+                composite_edge_input_layer::<B>
+            } else {
+                B::gns_edge_input_layer
+            };
+            f(
+                t[0].clone(),
+                t[1].clone(),
+                t[2].clone(),
+                t[3].clone(),
+                t[4].clone(),
+                s.clone(),
+                r.clone(),
+                relu,
+            )
+        };
+        assert_same_gradients(
+            &[e.clone(), w.clone(), b.clone(), p_s.clone(), p_r.clone()],
+            |t| layer(t, false),
+            |t| layer(t, true),
+            &format!("edge input layer, relu {relu}"),
+        );
+    }
+    assert_same_gradients(
+        &[e],
+        |t| B::gns_sum_by_receiver(t[0].clone(), r.clone(), nodes),
+        |t| composite_sum_by_receiver::<B>(t[0].clone(), r.clone(), nodes),
+        "sum by receiver",
+    );
 }

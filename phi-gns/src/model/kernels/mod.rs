@@ -4,14 +4,24 @@
 //! (`[E, 128] × [128, 128]` with ~30k edges), the LayerNorm after it, and the gather of node
 //! latents onto edges and the sum of messages back onto receivers. Each is written once from the
 //! primitives of [`Backend`] (the composite defaults below, differentiable on the autodiff
-//! backends); [`NdArray`](phi_core::backend::ndarray::NdArray) fuses them (`kernels/ndarray.rs`),
-//! Burn and tch keep the defaults.
+//! backends). [`NdArray`](phi_core::backend::ndarray::NdArray) fuses whole MLPs
+//! (`kernels/ndarray.rs`); Burn on Flex runs each layer as one parallel host kernel with a
+//! hand-written backward pass (`kernels/burn.rs`, on the row kernels of `kernels/host.rs`); tch
+//! calls libtorch's own `linear` and `layer_norm` (`kernels/tch.rs`); Burn on wgpu keeps the
+//! defaults.
 
 use phi_core::backend::{Backend, BinaryOp, ReduceOp};
 use phi_core::error::Result;
 use phi_core::tensor::{IntTensor, Tensor};
 
+#[cfg(feature = "burn")]
+mod burn;
+// The backward kernels serve Burn alone.
+#[cfg_attr(not(feature = "burn"), allow(dead_code))]
+mod host;
 mod ndarray;
+#[cfg(feature = "tch")]
+mod tch;
 
 /// LayerNorm's `eps`, PyTorch's and Sonnet's default.
 pub const LAYER_NORM_EPS: f32 = 1e-5;
@@ -288,8 +298,5 @@ pub fn composite_sum_by_receiver<B: Backend>(
         .into_primitive())
 }
 
-#[cfg(feature = "burn")]
-impl<I: phi_core::backend::burn::BurnInner> GnsKernels for phi_core::backend::burn::Burn<I> {}
-
-#[cfg(feature = "tch")]
-impl GnsKernels for phi_core::backend::tch::Tch {}
+#[cfg(feature = "wgpu")]
+impl GnsKernels for phi_core::backend::burn::BurnWgpu {}

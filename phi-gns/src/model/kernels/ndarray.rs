@@ -14,12 +14,10 @@ use phi_core::backend::ndarray::NdArray;
 use phi_core::error::{Result, TensorError};
 use rayon::prelude::*;
 
+use super::host::{
+    ROWS_PER_BLOCK, accumulate_product, add_into, gather_sum_rows, layer_norm_rows, relu_in_place,
+};
 use super::{Dense, EdgeInput, GnsKernels, LAYER_NORM_EPS, Norm};
-
-/// Rows of one block: 256 rows of 128 `f32` are 128 KiB, so a block's input, hidden and output
-/// activations stay in L2 together with a layer's weights (64 KiB), and `gemm` packs each
-/// weight matrix once per 256 rows (at 64 rows, packing took a third of the product's time).
-const ROWS_PER_BLOCK: usize = 256;
 
 type Array = ArcArray<f32, IxDyn>;
 
@@ -83,151 +81,6 @@ impl<'a> HostDense<'a> {
             relu_in_place(out);
         }
     }
-}
-
-/// `out += x Wᵀ` with `x [rows, k]`, `W [n, k]`, `out [rows, n]`, all row-major.
-fn accumulate_product(x: &[f32], rows: usize, k: usize, weight: &[f32], n: usize, out: &mut [f32]) {
-    if rows == 0 || n == 0 || k == 0 {
-        return;
-    }
-    assert!(x.len() >= rows * k && weight.len() >= n * k && out.len() >= rows * n);
-    // SAFETY: the three buffers hold the `rows × k`, `n × k` and `rows × n` elements the strides
-    // below address (checked above), and `out` does not alias the inputs (it is `&mut`).
-    unsafe {
-        gemm::gemm(
-            rows,
-            n,
-            k,
-            out.as_mut_ptr(),
-            1,
-            n as isize,
-            true,
-            x.as_ptr(),
-            1,
-            k as isize,
-            // Wᵀ: element (i, j) is W[j, i], at j·k + i.
-            weight.as_ptr(),
-            k as isize,
-            1,
-            1.0,
-            1.0,
-            false,
-            false,
-            false,
-            gemm::Parallelism::None,
-        );
-    }
-}
-
-/// Runs `$body` compiled for AVX2 where the CPU has it (the loops below then use 8-wide vectors
-/// instead of the baseline's 4-wide ones), else for the baseline. No FMA is enabled, so both
-/// compilations round every operation alike and give the same bits.
-macro_rules! simd_dispatch {
-    ($name:ident, $portable:ident, ($($arg:ident: $ty:ty),*)) => {
-        fn $name($($arg: $ty),*) {
-            #[cfg(target_arch = "x86_64")]
-            {
-                #[target_feature(enable = "avx2")]
-                fn wide($($arg: $ty),*) {
-                    $portable($($arg),*)
-                }
-                if std::arch::is_x86_feature_detected!("avx2") {
-                    // SAFETY: the CPU has AVX2, checked just above.
-                    return unsafe { wide($($arg),*) };
-                }
-            }
-            $portable($($arg),*)
-        }
-    };
-}
-
-simd_dispatch!(layer_norm_rows, layer_norm_rows_portable, (x: &mut [f32], gamma: &[f32], beta: &[f32], eps: f32));
-simd_dispatch!(relu_in_place, relu_in_place_portable, (x: &mut [f32]));
-simd_dispatch!(add_into, add_into_portable, (out: &mut [f32], x: &[f32], y: &[f32]));
-simd_dispatch!(
-    gather_sum_rows,
-    gather_sum_rows_portable,
-    (out: &mut [f32], bias: &[f32], from_senders: &[f32], from_receivers: &[f32], senders: &[i64], receivers: &[i64])
-);
-
-/// LayerNorm of every row of `x [rows, k]` in place, in `f32` with the two-pass (centred)
-/// variance.
-#[inline(always)]
-fn layer_norm_rows_portable(x: &mut [f32], gamma: &[f32], beta: &[f32], eps: f32) {
-    let k = gamma.len();
-    for row in x.chunks_exact_mut(k) {
-        let mean = lane_sum(row, |v| v) / k as f32;
-        let variance = lane_sum(row, |v| (v - mean) * (v - mean)) / k as f32;
-        let inverse = 1.0 / (variance + eps).sqrt();
-        for ((v, g), b) in row.iter_mut().zip(gamma).zip(beta) {
-            *v = (*v - mean) * inverse * g + b;
-        }
-    }
-}
-
-/// `max(x, 0)` in place, keeping NaN (see [`phi_core::backend::relu`]).
-#[inline(always)]
-fn relu_in_place_portable(x: &mut [f32]) {
-    for v in x {
-        *v = phi_core::backend::relu(*v);
-    }
-}
-
-/// Row `e` of `out` (width `bias.len()`) set to `bias + from_senders[senders[e]] +
-/// from_receivers[receivers[e]]`; the indices are checked by the caller.
-#[inline(always)]
-fn gather_sum_rows_portable(
-    out: &mut [f32],
-    bias: &[f32],
-    from_senders: &[f32],
-    from_receivers: &[f32],
-    senders: &[i64],
-    receivers: &[i64],
-) {
-    let width = bias.len();
-    for ((row, &s), &r) in out.chunks_exact_mut(width).zip(senders).zip(receivers) {
-        let (s, r) = (s as usize, r as usize);
-        let a = &from_senders[s * width..(s + 1) * width];
-        let c = &from_receivers[r * width..(r + 1) * width];
-        for (((v, b), a), c) in row.iter_mut().zip(bias).zip(a).zip(c) {
-            *v = b + a + c;
-        }
-    }
-}
-
-/// `out = x + y` element by element.
-#[inline(always)]
-fn add_into_portable(out: &mut [f32], x: &[f32], y: &[f32]) {
-    for ((o, a), b) in out.iter_mut().zip(x).zip(y) {
-        *o = a + b;
-    }
-}
-
-/// `Σ f(xᵢ)` accumulated in 16 independent lanes, then added pairwise: a fixed order (so the
-/// same result on any thread), and one that the compiler turns into vector adds instead of a
-/// chain of dependent scalar adds.
-#[inline(always)]
-fn lane_sum(x: &[f32], f: impl Fn(f32) -> f32) -> f32 {
-    const LANES: usize = 16;
-    let mut lanes = [0.0f32; LANES];
-    let chunks = x.chunks_exact(LANES);
-    let rest = chunks.remainder();
-    for chunk in chunks {
-        for (lane, v) in lanes.iter_mut().zip(chunk) {
-            *lane += f(*v);
-        }
-    }
-    for (lane, v) in lanes.iter_mut().zip(rest) {
-        *lane += f(*v);
-    }
-    let mut width = LANES;
-    while width > 1 {
-        width /= 2;
-        for i in 0..width {
-            lanes[i] += lanes[i + width];
-        }
-    }
-    lanes[0]
 }
 
 struct HostNorm<'a> {
