@@ -273,9 +273,18 @@ fn a_run_interrupted_by_sigint_or_killed_resumes_to_the_same_curve() {
     let preset = tiny_preset(&dir, "long", "noise", steps);
     let whole = dir.join("whole");
     ok(train(&data, &preset, &whole, &[]));
-    for signal in ["-INT", "-TERM", "-KILL"] {
-        let out = dir.join(format!("signal{signal}"));
-        let stopped = interrupt(&data, &preset, &out, 30, signal);
+    // A run killed before its first periodic checkpoint resumes from the one of step 0.
+    let rare = dir.join("rare.toml");
+    let text = std::fs::read_to_string(&preset).unwrap();
+    std::fs::write(&rare, text.replace("every = 6", "every = 100000")).unwrap();
+    for (signal, preset, name) in [
+        ("-INT", &preset, "int"),
+        ("-TERM", &preset, "term"),
+        ("-KILL", &preset, "kill"),
+        ("-KILL", &rare, "kill-early"),
+    ] {
+        let out = dir.join(format!("signal-{name}"));
+        let stopped = interrupt(&data, preset, &out, 30, signal);
         assert!(
             !stopped.status.success(),
             "{signal}: the run was not stopped"
@@ -289,7 +298,7 @@ fn a_run_interrupted_by_sigint_or_killed_resumes_to_the_same_curve() {
         }
         let done = ok(resume(&out, &[]));
         assert!(done.contains("steps in"), "{done}");
-        assert_eq!(losses(&out), losses(&whole), "{signal}");
+        assert_eq!(losses(&out), losses(&whole), "{name}");
         assert_eq!(final_weights(&out, steps), final_weights(&whole, steps));
     }
 }

@@ -192,7 +192,7 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
             // Only now that the dataset, both splits and the model are known to work.
             write_run_files(out, options, B::name())?;
         }
-        Ok(TrainingRun {
+        let mut run = TrainingRun {
             out: out.clone(),
             config: config.clone(),
             model,
@@ -203,7 +203,12 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
             device: device.clone(),
             log_started: Instant::now(),
             log_steps: 0,
-        })
+        };
+        if !options.resume {
+            // A run killed before its first periodic checkpoint can still be resumed.
+            run.checkpoint()?;
+        }
+        Ok(run)
     }
 
     /// Optimisation steps done.
