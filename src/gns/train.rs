@@ -15,7 +15,7 @@ use anyhow::{Context, Result, bail};
 use phi_core::AutodiffBackend;
 use phi_gns::model::GnsKernels;
 use phi_gns::train::TrainConfig;
-use phi_gns::train::run::{CONFIG_FILE, RunOptions, TRAIN_FILE, TrainRecord, TrainingRun};
+use phi_gns::train::run::{CONFIG_FILE, RunOptions, TrainRecord, TrainingRun};
 
 use crate::backends::BackendKind;
 
@@ -73,15 +73,7 @@ pub struct TrainArgs {
 /// The configuration, dataset and preset name of `args`.
 fn resolve(args: &TrainArgs) -> Result<(TrainConfig, PathBuf, String)> {
     let (preset_path, stored_data) = if args.resume {
-        let record_path = args.out.join(TRAIN_FILE);
-        let bytes = std::fs::read(&record_path).with_context(|| {
-            format!(
-                "--resume: {} is not a training run (no readable {TRAIN_FILE})",
-                args.out.display()
-            )
-        })?;
-        let record: TrainRecord = serde_json::from_slice(&bytes)
-            .with_context(|| format!("'{}'", record_path.display()))?;
+        let record = TrainRecord::read(&args.out).context("--resume")?;
         (
             args.config
                 .clone()

@@ -40,7 +40,7 @@ use super::{
     Adam, TrainError, multi_step_loss, non_kinematic_mask, pushforward_loss, random_walk_noise,
     train_step_with,
 };
-use crate::data::{Dataset, METADATA_FILE, Trajectory, read_trajectory};
+use crate::data::{Dataset, METADATA_FILE, Trajectory};
 use crate::model::{Gns, GnsKernels, GraphBatch, ModelError, load_model};
 
 /// The value of `made_by` in `train.json`.
@@ -78,7 +78,7 @@ pub struct RunOptions {
     pub out: PathBuf,
     /// The dataset directory.
     pub data: PathBuf,
-    /// The configuration (with overrides applied) and the name of the preset it came from.
+    /// The configuration, with the command line's overrides applied.
     pub config: TrainConfig,
     /// The preset's path or name, for `train.json` and errors.
     pub preset: String,
@@ -516,17 +516,9 @@ fn start_from<B: GnsKernels>(
 
 /// The first `limit` trajectories of `split` (all for 0).
 fn read_split(dataset: &Dataset, split: &str, limit: usize) -> Result<Vec<Trajectory>, TrainError> {
-    let len = dataset.split_len(split)?;
-    let count = if limit == 0 { len } else { limit.min(len) };
-    (0..count)
-        .map(|i| {
-            Ok(read_trajectory(&Dataset::trajectory_path(
-                dataset.dir(),
-                split,
-                i,
-            ))?)
-        })
-        .collect()
+    let reader = dataset.split(split)?;
+    let count = if limit == 0 { reader.len() } else { limit };
+    Ok(reader.take(count).collect::<Result<_, _>>()?)
 }
 
 fn checkpoint_error(path: &Path, reason: impl std::fmt::Display) -> TrainError {
@@ -569,7 +561,7 @@ fn check_resumable(
     backend: &str,
 ) -> Result<(), TrainError> {
     let path = out.join(TRAIN_FILE);
-    let record: TrainRecord = read_record(&path)?;
+    let record = TrainRecord::read(out)?;
     if record.made_by != MADE_BY {
         return Err(checkpoint_error(
             &path,
@@ -610,10 +602,18 @@ fn check_resumable(
     Ok(())
 }
 
-fn read_record(path: &Path) -> Result<TrainRecord, TrainError> {
-    let bytes =
-        std::fs::read(path).map_err(|e| checkpoint_error(path, format!("cannot read: {e}")))?;
-    serde_json::from_slice(&bytes).map_err(|e| checkpoint_error(path, e))
+impl TrainRecord {
+    /// The `train.json` of the training directory `out`.
+    ///
+    /// # Errors
+    /// [`TrainError::Checkpoint`] naming the file when it is missing or not such a record.
+    pub fn read(out: &Path) -> Result<Self, TrainError> {
+        let path = out.join(TRAIN_FILE);
+        let bytes = std::fs::read(&path).map_err(|e| {
+            checkpoint_error(&path, format!("cannot read ({e}): not a training run"))
+        })?;
+        serde_json::from_slice(&bytes).map_err(|e| checkpoint_error(&path, e))
+    }
 }
 
 /// `train.json`, `config.toml` and the header of `train.csv` of a fresh run.
