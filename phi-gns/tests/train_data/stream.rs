@@ -166,18 +166,16 @@ fn dropping_a_stream_stops_its_thread_promptly() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// The real training set, if present: 200 trajectories of 401 frames.
-const REAL_DATASET: &str = "/work/data/gns-train";
-
 /// How long 200 steps of a simulated 50 ms training step wait on the stream, with and without
-/// read-ahead: `cargo test -p phi-gns --release --test train_data -- --ignored --nocapture`.
+/// read-ahead, on a real dataset (`phi dataset generate`), and that read-ahead does not change
+/// the batches:
+/// `PHI_GNS_DATASET=DIR cargo test -p phi-gns --release --test train_data -- --ignored --nocapture`.
 #[test]
-#[ignore = "reads the 523 MB training set and takes about 25 s"]
+#[ignore = "reads a whole training split (~500 MB) and takes about 25 s"]
 fn a_step_waits_less_for_read_ahead_batches_on_the_real_dataset() {
-    let Ok(dataset) = Dataset::open(REAL_DATASET) else {
-        eprintln!("no dataset at {REAL_DATASET}; skipped");
-        return;
-    };
+    let dir = std::env::var("PHI_GNS_DATASET")
+        .expect("PHI_GNS_DATASET names the dataset directory to time");
+    let dataset = Dataset::open(&dir).unwrap_or_else(|e| panic!("{e}"));
     let steps = 200;
     let work = Duration::from_millis(50);
     let mut results = Vec::new();
@@ -207,10 +205,10 @@ fn a_step_waits_less_for_read_ahead_batches_on_the_real_dataset() {
             waited.as_secs_f64() * 1e3 / steps as f64,
             longest.as_secs_f64() * 1e3
         );
-        results.push((waited, batches));
+        results.push(batches);
     }
+    // The waits are printed, not asserted (the machine is shared); the batches must agree.
     for pair in results.chunks(2) {
-        assert_eq!(pair[0].1, pair[1].1, "read-ahead changed the batches");
-        assert!(pair[1].0 < pair[0].0, "read-ahead waited longer");
+        assert_eq!(pair[0], pair[1], "read-ahead changed the batches");
     }
 }
