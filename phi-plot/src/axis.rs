@@ -35,6 +35,15 @@ pub(crate) struct Axis {
     pub minor: Vec<f64>,
 }
 
+/// Where an axis must reach regardless of the data.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Anchor {
+    /// The range is the data's, with a margin on both sides.
+    None,
+    /// The range includes zero exactly, with no margin beyond it (bar charts on a linear axis).
+    Zero,
+}
+
 impl Axis {
     /// An axis over `values` (plot-space values of the drawable data: finite, and on a
     /// logarithmic axis `log10` of the positive data), with about `target_ticks` labelled
@@ -46,6 +55,7 @@ impl Axis {
     pub fn from_data(
         values: impl IntoIterator<Item = f64>,
         log: bool,
+        anchor: Anchor,
         target_ticks: usize,
     ) -> Option<Axis> {
         let (mut lo, mut hi) =
@@ -55,6 +65,11 @@ impl Axis {
                     None => Some((v, v)),
                     Some((lo, hi)) => Some((lo.min(v), hi.max(v))),
                 })?;
+        let include_zero = anchor == Anchor::Zero && !log;
+        if include_zero {
+            lo = lo.min(0.0);
+            hi = hi.max(0.0);
+        }
         if hi - lo <= f64::EPSILON * lo.abs().max(hi.abs()) {
             let centre = 0.5 * (lo + hi);
             let half = if log {
@@ -67,8 +82,12 @@ impl Axis {
             (lo, hi) = (centre - half, centre + half);
         } else {
             let pad = MARGIN * (hi - lo);
-            lo -= pad;
-            hi += pad;
+            if !(include_zero && lo == 0.0) {
+                lo -= pad;
+            }
+            if !(include_zero && hi == 0.0) {
+                hi += pad;
+            }
         }
         Some(Axis::with_range(lo, hi, log, target_ticks))
     }
@@ -89,6 +108,18 @@ impl Axis {
             ticks,
             labels,
             minor,
+        }
+    }
+
+    /// A categorical axis over `names`: category `i` spans `i..i + 1`, labelled at its centre.
+    pub fn categories(names: &[String]) -> Axis {
+        Axis {
+            lo: 0.0,
+            hi: names.len() as f64,
+            log: false,
+            ticks: (0..names.len()).map(|i| i as f64 + 0.5).collect(),
+            labels: names.to_vec(),
+            minor: Vec::new(),
         }
     }
 
@@ -420,16 +451,23 @@ mod tests {
 
     #[test]
     fn ranges_have_a_margin_and_never_collapse() {
-        let axis = Axis::from_data([0.0, 10.0, 4.0], false, 5).unwrap();
+        let axis = Axis::from_data([0.0, 10.0, 4.0], false, Anchor::None, 5).unwrap();
         assert_eq!((axis.lo, axis.hi), (-0.4, 10.4));
-        let axis = Axis::from_data([5.0, 5.0], false, 5).unwrap();
+        let axis = Axis::from_data([5.0, 5.0], false, Anchor::None, 5).unwrap();
         assert_eq!((axis.lo, axis.hi), (4.75, 5.25));
-        let axis = Axis::from_data([0.0], false, 5).unwrap();
+        let axis = Axis::from_data([0.0], false, Anchor::None, 5).unwrap();
         assert_eq!((axis.lo, axis.hi), (-1.0, 1.0));
-        let axis = Axis::from_data([-3.0], true, 5).unwrap();
+        let axis = Axis::from_data([-3.0], true, Anchor::None, 5).unwrap();
         assert_eq!((axis.lo, axis.hi), (-3.1, -2.9));
         assert!(axis.ticks.len() >= 2, "{axis:?}");
-        assert!(Axis::from_data([], false, 5).is_none());
+        // Bars: zero is included exactly, without a margin below it.
+        let axis = Axis::from_data([1.0, 3.0], false, Anchor::Zero, 5).unwrap();
+        assert_eq!((axis.lo, axis.hi), (0.0, 3.12));
+        let axis = Axis::from_data([-2.0, -2.0], false, Anchor::Zero, 5).unwrap();
+        assert_eq!((axis.lo, axis.hi), (-2.08, 0.0));
+        let axis = Axis::from_data([0.0, 0.0], false, Anchor::Zero, 5).unwrap();
+        assert_eq!((axis.lo, axis.hi), (-1.0, 1.0));
+        assert!(Axis::from_data([], false, Anchor::None, 5).is_none());
     }
 
     #[test]

@@ -1,6 +1,7 @@
-//! Plots for phi as PNG images: line plots with min–max bands ([`LinePlot`], [`Series`]).
+//! Plots for phi as PNG images: line plots with min–max bands ([`LinePlot`], [`Series`]) and
+//! grouped bar charts ([`BarChart`]).
 //!
-//! Every plot has a title, labelled axes with ticks and a grid, and a legend; series take the
+//! Every chart has a title, labelled axes with ticks and a grid, and a legend; series take the
 //! colours of a fixed qualitative palette ([`PALETTE`]) in order, and a series' band is a
 //! translucent area of its colour. Text is set in DejaVu Sans, embedded in the binary, so no
 //! system font library is needed. Values that cannot be drawn (`inf`, `NaN`, and values ≤ 0 on
@@ -30,6 +31,7 @@
 //! ```
 
 mod axis;
+mod bar;
 mod bitmap;
 mod chart;
 mod error;
@@ -38,6 +40,7 @@ mod style;
 #[cfg(test)]
 mod tests;
 
+pub use bar::{BarChart, BarSeries};
 pub use bitmap::{Bitmap, MAX_SIDE, MIN_SIZE};
 pub use chart::Legend;
 pub use error::PlotError;

@@ -10,7 +10,7 @@ use plotters::prelude::{
 };
 
 use crate::PlotError;
-use crate::axis::Axis;
+use crate::axis::{Anchor, Axis};
 use crate::bitmap::{Bitmap, check_size, render_with};
 use crate::chart::{Chart, Frame, Labels, Legend, draw_frame, draw_legend};
 use crate::error::{draw_error, plot_name};
@@ -256,10 +256,12 @@ impl LinePlot {
                 line.chain(band)
             })
         };
-        let x_axis =
-            |ticks| Axis::from_data(xs(), false, ticks).expect("a prepared series has points");
+        let x_axis = |ticks| {
+            Axis::from_data(xs(), false, Anchor::None, ticks).expect("a prepared series has points")
+        };
         let y_axis = |ticks, _| {
-            Axis::from_data(ys(), self.log_y, ticks).expect("a prepared series has points")
+            Axis::from_data(ys(), self.log_y, Anchor::None, ticks)
+                .expect("a prepared series has points")
         };
         let labels = Labels {
             title: &self.title,

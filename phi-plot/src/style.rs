@@ -120,6 +120,13 @@ impl Metrics {
         self.px(28.0)
     }
 
+    /// The height of a legend of `entries` lines, about (the drawing library sets the lines
+    /// 1.25 font sizes apart), with its padding and the gap to the frame.
+    pub fn legend_height(&self, entries: usize) -> u32 {
+        let text = 1.3 * 15.0 * self.scale * entries as f64;
+        text.ceil() as u32 + 2 * self.legend_margin() + self.px(8.0)
+    }
+
     pub fn line_width(&self) -> u32 {
         self.px(2.0)
     }

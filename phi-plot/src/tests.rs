@@ -2,7 +2,7 @@
 
 use crate::chart::Frame;
 use crate::style::{BAND_OPACITY, series_color};
-use crate::{Bitmap, Legend, LinePlot, PlotError, Series};
+use crate::{BarChart, BarSeries, Bitmap, Legend, LinePlot, PlotError, Series};
 
 /// Whether `pixel` is within `tolerance` of `color` in every channel.
 fn near(pixel: [u8; 3], color: [u8; 3], tolerance: u8) -> bool {
@@ -305,6 +305,53 @@ fn constant_series_gets_a_range_around_its_value() {
 }
 
 #[test]
+fn bars_rise_from_zero_in_their_group_and_missing_values_leave_no_bar() {
+    let chart = BarChart::new("metrics", "value", ["MSE", "EMD", "Chamfer"])
+        .with_legend(Legend::Hidden)
+        .with_series(BarSeries::new("ours", vec![1.0, 2.0, 3.0]))
+        .with_series(BarSeries::new("theirs", vec![2.0, f64::NAN, 1.0]));
+    let (image, frame) = chart.render_framed().unwrap();
+    assert_eq!(frame.y.lo, 0.0);
+    assert_eq!(frame.x.labels, ["MSE", "EMD", "Chamfer"]);
+    let (ours, theirs) = (series_color(0), series_color(1));
+    // Group g spans g..g + 1 with the bars in its middle 80 %: ours left, theirs right.
+    let at = |x: f64, y: f64| {
+        let (px, py) = frame.pixel(x, y);
+        image.pixel(px, py).unwrap()
+    };
+    assert!(near(at(0.3, 0.5), ours, 2));
+    assert!(near(at(0.7, 1.5), theirs, 2));
+    assert!(near(at(1.3, 1.9), ours, 2));
+    assert!(!near(at(1.3, 2.1), ours, 40), "bar of 2 is taller");
+    assert!(near(at(2.3, 2.9), ours, 2));
+    // No bar for the NaN in group EMD.
+    let (px0, _) = frame.pixel(1.55, 0.0);
+    let (px1, _) = frame.pixel(1.85, 0.0);
+    let (_, rows) = frame.image_area();
+    assert_eq!(count(&image, px0..px1, rows, |p| near(p, theirs, 40)), 0);
+}
+
+#[test]
+fn bar_legend_keeps_clear_of_the_bars() {
+    let chart = BarChart::new("metrics", "value", ["a", "b"])
+        .with_series(BarSeries::new("one", vec![1.0, 5.0]))
+        .with_series(BarSeries::new("two", vec![2.0, 5.0]));
+    let (image, frame) = chart.render_framed().unwrap();
+    let (_, rows) = frame.image_area();
+    let (xs, _) = inner(&frame, 3);
+    // The legend text is above the tallest bars.
+    let (_, top_of_bars) = frame.pixel(1.5, 5.0);
+    let legend_rows: Vec<u32> = rows
+        .filter(|&y| count(&image, xs.clone(), y..y + 1, dark) > 0)
+        .collect();
+    assert!(!legend_rows.is_empty());
+    assert!(
+        legend_rows.iter().all(|&y| y < top_of_bars),
+        "{legend_rows:?} vs {top_of_bars}"
+    );
+}
+
+#[test]
 fn data_errors_name_the_plot_and_the_series() {
     let plot = LinePlot::new("rollout", "t", "e");
     assert_eq!(message(plot.render()), "plot 'rollout' has no series");
@@ -340,4 +387,28 @@ fn data_errors_name_the_plot_and_the_series() {
         vec![1.0, 2.0],
     ));
     assert!(matches!(tiny.render(), Err(PlotError::Layout { .. })));
+}
+
+#[test]
+fn bar_errors_name_the_chart_and_the_series() {
+    let bars =
+        BarChart::new("bars", "v", ["a", "b"]).with_series(BarSeries::new("short", vec![1.0]));
+    assert_eq!(
+        message(bars.render()),
+        "plot 'bars', series 'short': values has 1 values, expected 2 (one per group)"
+    );
+    let no_groups = BarChart::new("bars", "v", Vec::<String>::new());
+    assert_eq!(message(no_groups.render()), "plot 'bars' has no groups");
+    let no_series = BarChart::new("bars", "v", ["a"]);
+    assert_eq!(message(no_series.render()), "plot 'bars' has no series");
+    let missing =
+        BarChart::new("bars", "v", ["a"]).with_series(BarSeries::new("nan", vec![f64::NAN]));
+    assert!(matches!(
+        missing.render(),
+        Err(PlotError::NothingToDraw { .. })
+    ));
+    let negative_on_log = BarChart::new("bars", "v", ["a"])
+        .with_log_y(true)
+        .with_series(BarSeries::new("neg", vec![-1.0]));
+    assert!(message(negative_on_log.render()).contains("logarithmic"));
 }

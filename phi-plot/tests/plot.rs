@@ -4,7 +4,7 @@
 use std::fs::File;
 use std::path::{Path, PathBuf};
 
-use phi_plot::{Bitmap, LinePlot, PlotError, Series};
+use phi_plot::{BarChart, BarSeries, Bitmap, LinePlot, PlotError, Series};
 
 /// A fresh, empty directory for one test.
 fn temp_dir(test: &str) -> PathBuf {
@@ -51,6 +51,12 @@ fn error_plot() -> LinePlot {
         .with_series(Series::new("model", t, error).with_band(lower, upper))
 }
 
+fn metric_bars() -> BarChart {
+    BarChart::new("metrics", "value", ["MSE", "EMD"])
+        .with_size(400, 300)
+        .with_series(BarSeries::new("a", vec![1.0, 2.0]))
+}
+
 #[test]
 fn written_png_decodes_to_the_rendered_image() {
     let dir = temp_dir("round-trip");
@@ -62,6 +68,17 @@ fn written_png_decodes_to_the_rendered_image() {
     assert_eq!(decoded, plot.render().unwrap());
     // Atomic writing leaves no temporary file behind.
     assert_eq!(file_names(&dir), ["error.png"]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bar_charts_are_written_at_their_size() {
+    let dir = temp_dir("bars");
+    let path = dir.join("bars.png");
+    metric_bars().write_png(&path).unwrap();
+    let decoded = read_png(&path);
+    assert_eq!((decoded.width, decoded.height), (400, 300));
+    assert_eq!(decoded, metric_bars().render().unwrap());
     let _ = std::fs::remove_dir_all(&dir);
 }
 
