@@ -132,6 +132,15 @@ impl BarChart {
         })
     }
 
+    /// Draws the chart onto `area` (a whole image or a panel of a figure).
+    pub(crate) fn draw_on(
+        &self,
+        area: &DrawingArea<BitMapBackend<'_>, Shift>,
+    ) -> Result<Frame, PlotError> {
+        let bars = self.prepare()?;
+        self.draw_prepared(area, &bars)
+    }
+
     /// Checks the series; returns per series the drawable bars as (group, value in plot space).
     fn prepare(&self) -> Result<Vec<Vec<(usize, f64)>>, PlotError> {
         let plot = || plot_name(&self.title);

@@ -1,5 +1,5 @@
-//! Plots for phi as PNG images: line plots with min–max bands ([`LinePlot`], [`Series`]) and
-//! grouped bar charts ([`BarChart`]).
+//! Plots for phi as PNG images: line plots with min–max bands ([`LinePlot`], [`Series`]),
+//! grouped bar charts ([`BarChart`]) and multi-panel figures of both ([`Figure`]).
 //!
 //! Every chart has a title, labelled axes with ticks and a grid, and a legend; series take the
 //! colours of a fixed qualitative palette ([`PALETTE`]) in order, and a series' band is a
@@ -12,7 +12,7 @@
 //! temporary file `.{name}.tmp-{pid}` beside the target that is renamed when complete.
 //!
 //! ```
-//! use phi_plot::{LinePlot, Series};
+//! use phi_plot::{Figure, LinePlot, Series};
 //!
 //! let t: Vec<f64> = (0..50).map(f64::from).collect();
 //! let mse: Vec<f64> = t.iter().map(|t| 1e-4 * (1.0 + 0.1 * t)).collect();
@@ -24,8 +24,11 @@
 //! let image = plot.render()?;
 //! assert_eq!((image.width, image.height), (800, 500));
 //!
+//! let figure = Figure::new("Water drop", 2)
+//!     .with_panel(plot.clone())
+//!     .with_panel(plot.with_log_y(false));
 //! let path = std::env::temp_dir().join(format!("phi-plot-doc-{}.png", std::process::id()));
-//! plot.write_png(&path)?;
+//! figure.write_png(&path)?;
 //! # std::fs::remove_file(&path).unwrap();
 //! # Ok::<(), phi_plot::PlotError>(())
 //! ```
@@ -35,6 +38,7 @@ mod bar;
 mod bitmap;
 mod chart;
 mod error;
+mod figure;
 mod line;
 mod style;
 #[cfg(test)]
@@ -44,5 +48,6 @@ pub use bar::{BarChart, BarSeries};
 pub use bitmap::{Bitmap, MAX_SIDE, MIN_SIZE};
 pub use chart::Legend;
 pub use error::PlotError;
+pub use figure::{Figure, Panel};
 pub use line::{Band, LinePlot, Series};
 pub use style::{BAND_OPACITY, PALETTE, series_color};

@@ -166,6 +166,15 @@ impl LinePlot {
         })
     }
 
+    /// Draws the plot onto `area` (a whole image or a panel of a figure).
+    pub(crate) fn draw_on(
+        &self,
+        area: &DrawingArea<BitMapBackend<'_>, Shift>,
+    ) -> Result<Frame, PlotError> {
+        let prepared = self.prepare()?;
+        self.draw_prepared(area, &prepared)
+    }
+
     /// Checks the series and splits them into drawable runs.
     fn prepare(&self) -> Result<Vec<PreparedSeries<'_>>, PlotError> {
         if self.series.is_empty() {

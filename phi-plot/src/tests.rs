@@ -2,7 +2,7 @@
 
 use crate::chart::Frame;
 use crate::style::{BAND_OPACITY, series_color};
-use crate::{BarChart, BarSeries, Bitmap, Legend, LinePlot, PlotError, Series};
+use crate::{BarChart, BarSeries, Bitmap, Figure, Legend, LinePlot, PlotError, Series};
 
 /// Whether `pixel` is within `tolerance` of `color` in every channel.
 fn near(pixel: [u8; 3], color: [u8; 3], tolerance: u8) -> bool {
@@ -352,6 +352,49 @@ fn bar_legend_keeps_clear_of_the_bars() {
 }
 
 #[test]
+fn figure_lays_panels_out_row_by_row() {
+    // Every panel's only series takes palette colour 0.
+    let panel = |title: &str| {
+        LinePlot::new(title, "t", "e")
+            .with_size(400, 300)
+            .with_legend(Legend::Hidden)
+            .with_series(Series::new("s", vec![0.0, 1.0], vec![0.0, 1.0]))
+    };
+    let figure = Figure::new("", 2)
+        .with_panel(panel("one"))
+        .with_panel(panel("two"))
+        .with_panel(
+            BarChart::new("three", "", ["g"])
+                .with_size(300, 200)
+                .with_series(BarSeries::new("b", vec![1.0])),
+        );
+    assert_eq!(figure.size().unwrap(), (800, 600));
+    let image = figure.render().unwrap();
+    assert_eq!((image.width, image.height), (800, 600));
+    let color = series_color(0);
+    // One line per cell of the first row, a bar in the first cell of the second, nothing in the
+    // fourth.
+    for (x0, y0, expected) in [
+        (0, 0, true),
+        (400, 0, true),
+        (0, 300, true),
+        (400, 300, false),
+    ] {
+        let n = count(&image, x0..x0 + 400, y0..y0 + 300, |p| {
+            tinted(p, color, 0.5)
+        });
+        assert_eq!(n > 0, expected, "cell at ({x0}, {y0}): {n} pixels");
+    }
+    let titled = Figure {
+        title: "all".into(),
+        ..figure
+    };
+    let (w, h) = titled.size().unwrap();
+    assert_eq!(w, 800);
+    assert!(h > 600);
+}
+
+#[test]
 fn data_errors_name_the_plot_and_the_series() {
     let plot = LinePlot::new("rollout", "t", "e");
     assert_eq!(message(plot.render()), "plot 'rollout' has no series");
@@ -411,4 +454,17 @@ fn bar_errors_name_the_chart_and_the_series() {
         .with_log_y(true)
         .with_series(BarSeries::new("neg", vec![-1.0]));
     assert!(message(negative_on_log.render()).contains("logarithmic"));
+}
+
+#[test]
+fn figure_errors_name_the_figure() {
+    assert_eq!(
+        message(Figure::new("fig", 2).render()),
+        "plot 'fig' has no panels"
+    );
+    let no_columns = Figure::new("fig", 0).with_panel(three_series_plot());
+    assert!(matches!(no_columns.render(), Err(PlotError::Layout { .. })));
+    // A panel's data error names the panel.
+    let broken = Figure::new("fig", 1).with_panel(LinePlot::new("empty panel", "", ""));
+    assert_eq!(message(broken.render()), "plot 'empty panel' has no series");
 }

@@ -4,7 +4,7 @@
 use std::fs::File;
 use std::path::{Path, PathBuf};
 
-use phi_plot::{BarChart, BarSeries, Bitmap, LinePlot, PlotError, Series};
+use phi_plot::{BarChart, BarSeries, Bitmap, Figure, LinePlot, PlotError, Series};
 
 /// A fresh, empty directory for one test.
 fn temp_dir(test: &str) -> PathBuf {
@@ -79,6 +79,23 @@ fn bar_charts_are_written_at_their_size() {
     let decoded = read_png(&path);
     assert_eq!((decoded.width, decoded.height), (400, 300));
     assert_eq!(decoded, metric_bars().render().unwrap());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn figures_are_written_as_a_grid_of_cells() {
+    let dir = temp_dir("figure");
+    let figure = Figure::new("", 2)
+        .with_panel(error_plot())
+        .with_panel(error_plot().with_log_y(false))
+        .with_panel(metric_bars());
+    let path = dir.join("figure.png");
+    figure.write_png(&path).unwrap();
+    let decoded = read_png(&path);
+    // Cells of the largest panel, 500 × 320, two per row.
+    assert_eq!((decoded.width, decoded.height), (1000, 640));
+    assert_eq!(figure.size().unwrap(), (1000, 640));
+    assert_eq!(file_names(&dir), ["figure.png"]);
     let _ = std::fs::remove_dir_all(&dir);
 }
 
