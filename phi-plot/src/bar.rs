@@ -3,13 +3,14 @@
 
 use std::path::Path;
 
-use plotters::coord::Shift;
-use plotters::prelude::{BitMapBackend, Color, DrawingArea, Rectangle};
+use plotters::prelude::{Color, Rectangle};
 
 use crate::PlotError;
 use crate::axis::{Anchor, Axis};
 use crate::bitmap::{Bitmap, check_size, render_with};
-use crate::chart::{Frame, Labels, Legend, draw_frame, draw_legend};
+use crate::chart::{
+    Area, Frame, Labels, Legend, LegendEntry, LegendKey, draw_frame, draw_legend, legend_height,
+};
 use crate::error::{draw_error, plot_name};
 use crate::style::{Metrics, series_rgb};
 
@@ -133,10 +134,7 @@ impl BarChart {
     }
 
     /// Draws the chart onto `area` (a whole image or a panel of a figure).
-    pub(crate) fn draw_on(
-        &self,
-        area: &DrawingArea<BitMapBackend<'_>, Shift>,
-    ) -> Result<Frame, PlotError> {
+    pub(crate) fn draw_on(&self, area: &Area<'_>) -> Result<Frame, PlotError> {
         let bars = self.prepare()?;
         self.draw_prepared(area, &bars)
     }
@@ -187,7 +185,7 @@ impl BarChart {
 
     fn draw_prepared(
         &self,
-        area: &DrawingArea<BitMapBackend<'_>, Shift>,
+        area: &Area<'_>,
         bars: &[Vec<(usize, f64)>],
     ) -> Result<Frame, PlotError> {
         let (width, height) = area.dim_in_pixel();
@@ -209,7 +207,7 @@ impl BarChart {
             if entries == 0 || !matches!(self.legend, Legend::UpperLeft | Legend::UpperRight) {
                 return axis;
             }
-            let legend = f64::from(metrics.legend_height(entries));
+            let legend = f64::from(legend_height(&metrics, entries));
             let share = (legend / f64::from(plot_height.max(1))).min(0.5);
             let hi = axis.lo + (axis.hi - axis.lo) / (1.0 - share);
             Axis::with_range(axis.lo, hi, self.log_y, ticks)
@@ -223,6 +221,7 @@ impl BarChart {
         let base = if self.log_y { frame.y.lo } else { 0.0 };
         let slot = GROUP_FILL / bars.len() as f64;
         let err = draw_error(&self.title);
+        let mut entries = Vec::new();
         for (index, (series, bars)) in self.series.iter().zip(bars).enumerate() {
             let color = series_rgb(index);
             let left_of = |group: usize| {
@@ -238,21 +237,16 @@ impl BarChart {
                     color.filled(),
                 )
             });
-            let entry = metrics.px(6.0) as i32;
-            let annotation = chart.draw_series(rectangles).map_err(&err)?;
-            // A series without a label has no legend entry.
-            if series.label.is_empty() {
-                continue;
-            }
-            annotation
-                .label(series.label.as_str())
-                .legend(move |(x, y)| {
-                    Rectangle::new([(x, y - entry), (x + 2 * entry, y + entry)], color.filled())
+            chart.draw_series(rectangles).map_err(&err)?;
+            // A series without a label has no entry.
+            if !series.label.is_empty() {
+                entries.push(LegendEntry {
+                    label: &series.label,
+                    key: LegendKey::Swatch(color),
                 });
+            }
         }
-        if self.series.iter().any(|s| !s.label.is_empty()) {
-            draw_legend(&mut chart, &metrics, self.legend, &self.title)?;
-        }
+        draw_legend(&chart, &metrics, self.legend, &entries, &self.title)?;
         Ok(frame)
     }
 }

@@ -4,12 +4,14 @@ use std::fs::File;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use plotters::coord::Shift;
-use plotters::prelude::{BitMapBackend, DrawingArea, IntoDrawingArea, WHITE};
+use plotters::prelude::{IntoDrawingArea, WHITE};
 
 use crate::PlotError;
+use crate::canvas::Canvas;
+use crate::chart::Area;
 use crate::error::{draw_error, plot_name};
-use crate::style::{SUPERSAMPLE, ensure_font};
+use crate::style::SUPERSAMPLE;
+use crate::text;
 
 /// An 8-bit RGB image: `rgb` holds `width · height · 3` bytes, row by row from the top left.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -86,14 +88,13 @@ pub(crate) fn check_size(title: &str, (width, height): (u32, u32)) -> Result<(),
 pub(crate) fn render_with<T>(
     title: &str,
     (width, height): (u32, u32),
-    draw: impl FnOnce(&DrawingArea<BitMapBackend<'_>, Shift>) -> Result<T, PlotError>,
+    draw: impl FnOnce(&Area<'_>) -> Result<T, PlotError>,
 ) -> Result<(Bitmap, T), PlotError> {
-    ensure_font()?;
+    text::face()?;
     let (fine_width, fine_height) = (width * SUPERSAMPLE, height * SUPERSAMPLE);
     let mut fine = vec![255u8; fine_width as usize * fine_height as usize * 3];
     let result = {
-        let root =
-            BitMapBackend::with_buffer(&mut fine, (fine_width, fine_height)).into_drawing_area();
+        let root = Canvas::new(&mut fine, (fine_width, fine_height)).into_drawing_area();
         root.fill(&WHITE).map_err(draw_error(title))?;
         let result = draw(&root)?;
         root.present().map_err(draw_error(title))?;

@@ -2,22 +2,28 @@
 
 use std::ops::Range;
 
-use plotters::chart::SeriesLabelPosition;
 use plotters::coord::Shift;
 use plotters::prelude::{
-    BitMapBackend, Cartesian2d, ChartBuilder, ChartContext, Color, DrawingArea, WHITE,
+    Cartesian2d, ChartBuilder, ChartContext, Color, DrawingArea, PathElement, RGBColor, Rectangle,
+    Text, WHITE,
 };
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::PlotError;
 use crate::axis::Axis;
+use crate::canvas::Canvas;
 use crate::error::draw_error;
-use crate::style::{GRID, INK, MINOR_GRID, Metrics};
+use crate::style::{BAND_OPACITY, GRID, INK, MINOR_GRID, Metrics};
+use crate::text;
 
 /// The coordinates of a chart: plot space (see [`Axis`]) on both axes, with our own ticks.
 pub(crate) type Coord = Cartesian2d<Axis, Axis>;
 
-/// A chart drawn into a bitmap.
-pub(crate) type Chart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Coord>;
+/// A drawing area of a [`Canvas`] in pixel coordinates: a whole image or a panel of a figure.
+pub(crate) type Area<'b> = DrawingArea<Canvas<'b>, Shift>;
+
+/// A chart drawn onto a [`Canvas`].
+pub(crate) type Chart<'a, 'b> = ChartContext<'a, Canvas<'b>, Coord>;
 
 /// Where a chart's legend goes: a corner inside the plot area, or nowhere.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -88,7 +94,7 @@ pub(crate) struct Labels<'t> {
 /// `y_axis` also the height of the plot area in drawing pixels.
 /// `x_grid` says whether vertical grid lines are drawn at the x ticks.
 pub(crate) fn draw_frame<'a, 'b>(
-    area: &'a DrawingArea<BitMapBackend<'b>, Shift>,
+    area: &'a Area<'b>,
     metrics: &Metrics,
     labels: &Labels<'_>,
     x_axis: impl FnOnce(usize) -> Axis,
@@ -170,7 +176,7 @@ pub(crate) fn draw_frame<'a, 'b>(
         .axis_desc_style(axis_font)
         .bold_line_style(GRID.stroke_width(1))
         .light_line_style(MINOR_GRID.stroke_width(1))
-        .axis_style(INK.stroke_width(1))
+        .axis_style(INK.stroke_width(metrics.px(1.0)))
         .set_all_tick_mark_size(metrics.tick_length());
     if !labels.x.is_empty() {
         mesh.x_desc(labels.x);
@@ -191,30 +197,123 @@ pub(crate) fn draw_frame<'a, 'b>(
     Ok((chart, frame))
 }
 
-/// Draws the legend of the labelled series of `chart` at `position`.
-pub(crate) fn draw_legend<'a, 'b: 'a>(
-    chart: &mut Chart<'a, 'b>,
+/// What stands beside a label in the legend.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum LegendKey {
+    /// A short line of the series' colour and width, over a band swatch if `band`.
+    Line {
+        color: RGBColor,
+        width: u32,
+        band: bool,
+    },
+    /// A filled square (bar charts).
+    Swatch(RGBColor),
+}
+
+/// One line of a legend.
+#[derive(Debug, Clone)]
+pub(crate) struct LegendEntry<'l> {
+    pub label: &'l str,
+    pub key: LegendKey,
+}
+
+/// The height of the legend box of `entries` lines plus its distance from the frame, in
+/// drawing pixels.
+pub(crate) fn legend_height(metrics: &Metrics, entries: usize) -> u32 {
+    let line = metrics.legend_line_height();
+    2 * metrics.legend_margin() + entries as u32 * line + metrics.legend_inset()
+}
+
+/// Draws a legend of `entries` in a corner of the plot area of `chart`: a white box with a
+/// grey border, one line per entry with its key and label.
+pub(crate) fn draw_legend(
+    chart: &Chart<'_, '_>,
     metrics: &Metrics,
     position: Legend,
+    entries: &[LegendEntry<'_>],
     title: &str,
 ) -> Result<(), PlotError> {
-    let position = match position {
-        Legend::UpperRight => SeriesLabelPosition::UpperRight,
-        Legend::UpperLeft => SeriesLabelPosition::UpperLeft,
-        Legend::LowerLeft => SeriesLabelPosition::LowerLeft,
-        Legend::LowerRight => SeriesLabelPosition::LowerRight,
-        Legend::Hidden => return Ok(()),
+    if position == Legend::Hidden || entries.is_empty() {
+        return Ok(());
+    }
+    let err = draw_error(title);
+    let font = text::face()?;
+    let size = metrics.legend_font_size();
+    let widest = entries
+        .iter()
+        .map(|e| text::extent(font, e.label, size).0.ceil() as i32)
+        .max()
+        .unwrap_or(0);
+    let pad = metrics.legend_margin() as i32;
+    let line = metrics.legend_line_height() as i32;
+    let key_width = metrics.legend_key_width() as i32;
+    let gap = metrics.px(8.0) as i32;
+    let width = pad + key_width + gap + widest + pad;
+    let height = 2 * pad + entries.len() as i32 * line;
+
+    let area = chart.plotting_area().strip_coord_spec();
+    let (area_width, area_height) = area.dim_in_pixel();
+    let (area_width, area_height) = (area_width as i32, area_height as i32);
+    let inset = metrics.legend_inset() as i32;
+    let (left, right_edge) = (inset, area_width - inset - width);
+    let (top, bottom_edge) = (inset, area_height - inset - height);
+    let (x0, y0) = match position {
+        Legend::UpperRight => (right_edge, top),
+        Legend::UpperLeft => (left, top),
+        Legend::LowerLeft => (left, bottom_edge),
+        Legend::LowerRight => (right_edge, bottom_edge),
+        Legend::Hidden => unreachable!("returned above"),
     };
-    chart
-        .configure_series_labels()
-        .position(position)
-        .margin(metrics.legend_margin())
-        .legend_area_size(metrics.legend_key_width())
-        .label_font(metrics.legend_font())
-        .background_style(WHITE.mix(0.9))
-        .border_style(INK.mix(0.5).stroke_width(1))
-        .draw()
-        .map_err(draw_error(title))
+    let corners = [(x0, y0), (x0 + width, y0 + height)];
+    area.draw(&Rectangle::new(corners, WHITE.mix(0.9).filled()))
+        .map_err(&err)?;
+    area.draw(&Rectangle::new(
+        corners,
+        INK.mix(0.5).stroke_width(metrics.px(1.0)),
+    ))
+    .map_err(&err)?;
+    let label_style = metrics
+        .legend_font()
+        .pos(Pos::new(HPos::Left, VPos::Center));
+    let half_key = metrics.px(6.0) as i32;
+    for (i, entry) in entries.iter().enumerate() {
+        let x = x0 + pad;
+        let y = y0 + pad + i as i32 * line + line / 2;
+        match entry.key {
+            LegendKey::Line { color, width, band } => {
+                if band {
+                    area.draw(&Rectangle::new(
+                        [(x, y - half_key), (x + key_width, y + half_key)],
+                        color.mix(BAND_OPACITY).filled(),
+                    ))
+                    .map_err(&err)?;
+                }
+                area.draw(&PathElement::new(
+                    vec![(x, y), (x + key_width, y)],
+                    color.stroke_width(width),
+                ))
+                .map_err(&err)?;
+            }
+            LegendKey::Swatch(color) => {
+                let centre = x + key_width / 2;
+                area.draw(&Rectangle::new(
+                    [
+                        (centre - half_key, y - half_key),
+                        (centre + half_key, y + half_key),
+                    ],
+                    color.filled(),
+                ))
+                .map_err(&err)?;
+            }
+        }
+        area.draw(&Text::new(
+            entry.label,
+            (x + key_width + gap, y),
+            label_style.clone(),
+        ))
+        .map_err(&err)?;
+    }
+    Ok(())
 }
 
 /// How many ticks fit along `pixels` with about `spacing` pixels between them (2 to 10).

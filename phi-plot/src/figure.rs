@@ -2,11 +2,11 @@
 
 use std::path::Path;
 
-use plotters::coord::Shift;
-use plotters::prelude::{BitMapBackend, DrawingArea, Text};
+use plotters::prelude::Text;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::bitmap::{Bitmap, check_size, render_with};
+use crate::chart::Area;
 use crate::error::{draw_error, plot_name};
 use crate::style::{Metrics, SUPERSAMPLE};
 use crate::{BarChart, LinePlot, PlotError};
@@ -47,7 +47,7 @@ impl Panel {
         }
     }
 
-    fn draw_on(&self, area: &DrawingArea<BitMapBackend<'_>, Shift>) -> Result<(), PlotError> {
+    fn draw_on(&self, area: &Area<'_>) -> Result<(), PlotError> {
         match self {
             Panel::Line(plot) => plot.draw_on(area).map(drop),
             Panel::Bar(chart) => chart.draw_on(area).map(drop),

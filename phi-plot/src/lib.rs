@@ -36,6 +36,7 @@
 mod axis;
 mod bar;
 mod bitmap;
+mod canvas;
 mod chart;
 mod error;
 mod figure;
@@ -43,6 +44,7 @@ mod line;
 mod style;
 #[cfg(test)]
 mod tests;
+mod text;
 
 pub use bar::{BarChart, BarSeries};
 pub use bitmap::{Bitmap, MAX_SIDE, MIN_SIZE};

@@ -2,17 +2,17 @@
 
 use std::path::Path;
 
-use plotters::chart::SeriesAnno;
-use plotters::coord::Shift;
 use plotters::prelude::{
-    BitMapBackend, Circle, Color, DrawingArea, DrawingAreaErrorKind, DrawingBackend, EmptyElement,
-    PathElement, Polygon, RGBColor, Rectangle,
+    Circle, Color, DrawingAreaErrorKind, DrawingBackend, PathElement, Polygon, RGBColor,
 };
 
 use crate::PlotError;
 use crate::axis::{Anchor, Axis};
 use crate::bitmap::{Bitmap, check_size, render_with};
-use crate::chart::{Chart, Frame, Labels, Legend, draw_frame, draw_legend};
+use crate::canvas::Canvas;
+use crate::chart::{
+    Area, Chart, Frame, Labels, Legend, LegendEntry, LegendKey, draw_frame, draw_legend,
+};
 use crate::error::{draw_error, plot_name};
 use crate::style::{BAND_OPACITY, Metrics, series_rgb};
 
@@ -167,10 +167,7 @@ impl LinePlot {
     }
 
     /// Draws the plot onto `area` (a whole image or a panel of a figure).
-    pub(crate) fn draw_on(
-        &self,
-        area: &DrawingArea<BitMapBackend<'_>, Shift>,
-    ) -> Result<Frame, PlotError> {
+    pub(crate) fn draw_on(&self, area: &Area<'_>) -> Result<Frame, PlotError> {
         let prepared = self.prepare()?;
         self.draw_prepared(area, &prepared)
     }
@@ -245,7 +242,7 @@ impl LinePlot {
 
     fn draw_prepared(
         &self,
-        area: &DrawingArea<BitMapBackend<'_>, Shift>,
+        area: &Area<'_>,
         prepared: &[PreparedSeries<'_>],
     ) -> Result<Frame, PlotError> {
         let (width, height) = area.dim_in_pixel();
@@ -295,79 +292,50 @@ impl LinePlot {
         }
         let stroke_width = metrics.line_width();
         let dot_radius = metrics.px(3.0) as i32;
-        let entry_length = metrics.px(24.0) as i32;
-        let entry_half_height = metrics.px(6.0) as i32;
+        let mut entries = Vec::new();
         for (index, series) in prepared.iter().enumerate() {
             let color = series_rgb(index);
-            let (first, rest) = series
-                .runs
-                .split_first()
-                .expect("a prepared series has a run");
-            let annotation =
-                draw_run(&mut chart, first, color, stroke_width, dot_radius).map_err(&err)?;
-            // Only the first run is labelled: plotters lists every labelled call in the legend.
-            // A series without a label has no entry.
-            if series.label.is_empty() {
-                for run in rest {
-                    draw_run(&mut chart, run, color, stroke_width, dot_radius).map_err(&err)?;
-                }
-                continue;
-            }
-            annotation.label(series.label);
-            let line = move |(x, y): (i32, i32)| {
-                PathElement::new(
-                    vec![(x, y), (x + entry_length, y)],
-                    color.stroke_width(stroke_width),
-                )
-            };
-            if series.band_runs.is_empty() {
-                annotation.legend(line);
-            } else {
-                annotation.legend(move |(x, y)| {
-                    let band = Rectangle::new(
-                        [
-                            (x, y - entry_half_height),
-                            (x + entry_length, y + entry_half_height),
-                        ],
-                        color.mix(BAND_OPACITY).filled(),
-                    );
-                    EmptyElement::at((0, 0)) + band + line((x, y))
-                });
-            }
-            for run in rest {
+            for run in &series.runs {
                 draw_run(&mut chart, run, color, stroke_width, dot_radius).map_err(&err)?;
             }
+            // A series without a label has no entry.
+            if !series.label.is_empty() {
+                entries.push(LegendEntry {
+                    label: series.label,
+                    key: LegendKey::Line {
+                        color,
+                        width: stroke_width,
+                        band: !series.band_runs.is_empty(),
+                    },
+                });
+            }
         }
-        if prepared.iter().any(|s| !s.label.is_empty()) {
-            draw_legend(&mut chart, &metrics, self.legend, &self.title)?;
-        }
+        draw_legend(&chart, &metrics, self.legend, &entries, &self.title)?;
         Ok(frame)
     }
 }
 
 /// Draws one run of points: a line, or a dot for a run of one point.
-fn draw_run<'c, 'a, 'b>(
-    chart: &'c mut Chart<'a, 'b>,
+fn draw_run(
+    chart: &mut Chart<'_, '_>,
     run: &[(f64, f64)],
     color: RGBColor,
     stroke_width: u32,
     dot_radius: i32,
-) -> Result<
-    &'c mut SeriesAnno<'a, BitMapBackend<'b>>,
-    DrawingAreaErrorKind<<BitMapBackend<'b> as DrawingBackend>::ErrorType>,
-> {
+) -> Result<(), DrawingAreaErrorKind<<Canvas<'static> as DrawingBackend>::ErrorType>> {
     if let [point] = run {
         chart.draw_series(std::iter::once(Circle::new(
             *point,
             dot_radius,
             color.filled(),
-        )))
+        )))?;
     } else {
         chart.draw_series(std::iter::once(PathElement::new(
             run.to_vec(),
             color.stroke_width(stroke_width),
-        )))
+        )))?;
     }
+    Ok(())
 }
 
 /// The maximal runs of consecutive `Some` items.

@@ -1,13 +1,10 @@
 //! The look shared by all plots: the series palette, the embedded font and sizes that scale with
 //! the image.
 
-use std::sync::OnceLock;
+use plotters::style::{FontFamily, RGBColor, TextStyle};
 
-use plotters::style::{FontFamily, FontStyle, RGBColor, TextStyle, register_font};
-
-use crate::PlotError;
-
-/// The family name under which the embedded DejaVu Sans is registered with plotters.
+/// The family name in text styles; [`crate::canvas::Canvas`] draws all text in the embedded
+/// DejaVu Sans whatever the style names.
 const FAMILY: &str = "DejaVu Sans";
 
 /// The series colours, in order: the ten colours of the Tableau 10 qualitative palette
@@ -46,14 +43,6 @@ pub(crate) const GRID: RGBColor = RGBColor(222, 222, 222);
 pub(crate) const MINOR_GRID: RGBColor = RGBColor(242, 242, 242);
 /// Text, axes and tick marks.
 pub(crate) const INK: RGBColor = RGBColor(20, 20, 20);
-
-/// Registers the embedded font with plotters, once per process.
-pub(crate) fn ensure_font() -> Result<(), PlotError> {
-    static REGISTERED: OnceLock<bool> = OnceLock::new();
-    let ok = *REGISTERED
-        .get_or_init(|| register_font(FAMILY, FontStyle::Normal, dejavu::sans::regular()).is_ok());
-    if ok { Ok(()) } else { Err(PlotError::Font) }
-}
 
 /// Charts are drawn at this many times the image resolution in each direction and then
 /// averaged down, which smooths the edges of lines, bands and bars (the drawing library does
@@ -107,24 +96,32 @@ impl Metrics {
     }
 
     pub fn legend_font(&self) -> TextStyle<'static> {
-        self.text(15.0)
+        self.text(self.legend_font_size() / self.scale)
+    }
+
+    /// The legend's font size in drawing pixels.
+    pub fn legend_font_size(&self) -> f64 {
+        15.0 * self.scale
+    }
+
+    /// Distance between the lines of the legend.
+    pub fn legend_line_height(&self) -> u32 {
+        (1.35 * self.legend_font_size()).ceil() as u32
     }
 
     /// Padding inside the legend box.
     pub fn legend_margin(&self) -> u32 {
+        self.px(8.0)
+    }
+
+    /// Distance of the legend box from the frame of the plot area.
+    pub fn legend_inset(&self) -> u32 {
         self.px(10.0)
     }
 
     /// Width reserved for the line or swatch of a legend entry.
     pub fn legend_key_width(&self) -> u32 {
         self.px(28.0)
-    }
-
-    /// The height of a legend of `entries` lines, about (the drawing library sets the lines
-    /// 1.25 font sizes apart), with its padding and the gap to the frame.
-    pub fn legend_height(&self, entries: usize) -> u32 {
-        let text = 1.3 * 15.0 * self.scale * entries as f64;
-        text.ceil() as u32 + 2 * self.legend_margin() + self.px(8.0)
     }
 
     pub fn line_width(&self) -> u32 {

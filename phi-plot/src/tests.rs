@@ -337,8 +337,7 @@ fn bar_legend_keeps_clear_of_the_bars() {
         .with_series(BarSeries::new("one", vec![1.0, 5.0]))
         .with_series(BarSeries::new("two", vec![2.0, 5.0]));
     let (image, frame) = chart.render_framed().unwrap();
-    let (_, rows) = frame.image_area();
-    let (xs, _) = inner(&frame, 3);
+    let (xs, rows) = inner(&frame, 3);
     // The legend text is above the tallest bars.
     let (_, top_of_bars) = frame.pixel(1.5, 5.0);
     let legend_rows: Vec<u32> = rows
