@@ -27,7 +27,7 @@ mod sinkhorn;
 
 pub use chamfer::chamfer_distance;
 pub use l2::l2_loss;
-pub use sinkhorn::{SinkhornOptions, sinkhorn_divergence};
+pub use sinkhorn::{SinkhornOptions, sinkhorn_divergence, sinkhorn_divergence_host};
 
 use thiserror::Error;
 

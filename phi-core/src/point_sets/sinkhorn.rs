@@ -251,6 +251,49 @@ fn average(into: &mut [f64], new: &[f64]) {
     }
 }
 
+/// [`sinkhorn_divergence`]'s value computed entirely on the host in f64, for reporting (not
+/// differentiable): `a` `[N·d]` and `b` `[M·d]` row-major, the result in the units of the cost
+/// `½|x − y|²`.
+///
+/// # Errors
+/// [`PointSetError::Invalid`] for empty sets, lengths that are not multiples of `d`, non-finite
+/// coordinates or an `ε` that is not positive and finite.
+pub fn sinkhorn_divergence_host(
+    a: &[f32],
+    b: &[f32],
+    d: usize,
+    options: &SinkhornOptions,
+) -> Result<f64> {
+    let invalid = |reason: String| {
+        Err(PointSetError::Invalid {
+            what: "sinkhorn divergence",
+            reason,
+        })
+    };
+    if d == 0
+        || a.is_empty()
+        || b.is_empty()
+        || !a.len().is_multiple_of(d)
+        || !b.len().is_multiple_of(d)
+    {
+        return invalid(format!(
+            "need non-empty sets of {d}-dimensional points, got {} and {} values",
+            a.len(),
+            b.len()
+        ));
+    }
+    if let Some(bad) = a.iter().chain(b).position(|x| !x.is_finite()) {
+        return invalid(format!("coordinate {bad} of the two sets is not finite"));
+    }
+    if !(options.epsilon.is_finite() && options.epsilon > 0.0) {
+        return invalid(format!(
+            "epsilon must be positive and finite, got {}",
+            options.epsilon
+        ));
+    }
+    Ok(host_sinkhorn_divergence(a, b, d, options))
+}
+
 /// The Sinkhorn divergence computed entirely on the host (for reporting), from host data
 /// `[N·d]`, `[M·d]`.
 pub(super) fn host_sinkhorn_divergence(
