@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Installs what the tests need (libtorch 2.9.0 into .venv-torch, for the tch backend) and runs every
+# Installs what the tests need (libtorch 2.11.0 into .venv-torch, for the tch backend) and runs every
 # test of the workspace on every backend: ndarray, Burn and tch. Ends with the totals over all test
 # binaries.
 set -euo pipefail

@@ -34,7 +34,7 @@ pub struct TrainArgs {
     /// The backend; it must have autodiff.
     #[arg(long, default_value = "burn")]
     pub backend: BackendKind,
-    /// The device: cpu, or cuda / cuda:N on the tch backend.
+    /// The device: cpu, or cuda / cuda:N on the tch backend of a `--features tch,cuda` build.
     #[arg(long, default_value = "cpu")]
     pub device: String,
     /// The total number of steps (overrides training.steps).
@@ -150,6 +150,21 @@ pub fn run(args: TrainArgs) -> Result<()> {
         otherwise => bail!("the {kind} backend has no autodiff and cannot train; use --backend burn or tch"))
 }
 
+/// The devices `--device` takes on a backend of this build, for the message that refuses another.
+/// A build without the `cuda` feature leaves libtorch's CUDA library unlinked (see build.rs), so
+/// its tch backend sees no CUDA device even on a GPU machine.
+fn devices_hint(backend: &str) -> &'static str {
+    match backend {
+        "tch" if cfg!(feature = "cuda") => {
+            "cpu, or cuda / cuda:N where libtorch sees that CUDA device"
+        }
+        "tch" => {
+            "cpu only: this build links libtorch without CUDA; build with `--features tch,cuda`"
+        }
+        _ => "cpu",
+    }
+}
+
 fn train<B: AutodiffBackend + GnsKernels>(
     options: &RunOptions,
     device: &str,
@@ -157,13 +172,9 @@ fn train<B: AutodiffBackend + GnsKernels>(
 ) -> Result<()> {
     let Some(device) = B::device_by_name(device) else {
         bail!(
-            "--device {device}: not available on the {} backend of this build (cpu{})",
+            "--device {device}: not available on the {} backend of this build ({})",
             B::name(),
-            if B::name() == "tch" {
-                ", or cuda / cuda:N where libtorch sees a CUDA device"
-            } else {
-                ""
-            }
+            devices_hint(B::name())
         );
     };
     let mut run = TrainingRun::<B>::open(options, &device)?;

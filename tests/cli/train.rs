@@ -363,6 +363,20 @@ fn train_refuses_what_it_cannot_run_and_names_why() {
         &["--device", "cuda:7"],
     ));
     assert!(e.contains("--device cuda:7"), "{e}");
+    // tch without the `cuda` feature cannot see a GPU; the message names the feature that can.
+    if cfg!(not(feature = "cuda"))
+        && phi::backends::BackendKind::available()
+            .iter()
+            .any(|k| k.name() == "tch")
+    {
+        let e = stderr(&train(
+            &data,
+            &preset,
+            &dir.join("tch-gpu"),
+            &["--backend", "tch", "--device", "cuda"],
+        ));
+        assert!(e.contains("--features tch,cuda"), "{e}");
+    }
     // A resumed run with another configuration.
     let other = dir.join("other.toml");
     std::fs::write(&other, text.replace("seed = 11", "seed = 12")).unwrap();

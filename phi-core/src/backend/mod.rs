@@ -22,9 +22,10 @@
 //!
 //! # Implementations
 //! - [`ndarray::NdArray`] (feature `ndarray`): ndarray + rayon, forward only, the fast CPU path.
-//! - [`burn::Burn`] (feature `burn`): Burn's autodiff over its CPU backend; CUDA and wgpu devices
-//!   with the `cuda` and `wgpu` features.
-//! - [`tch::Tch`] (feature `tch`): libtorch through tch, CPU and CUDA, with libtorch's autograd.
+//! - [`burn::Burn`] (feature `burn`): Burn's autodiff over its CPU backend; wgpu devices with the
+//!   `wgpu` feature.
+//! - [`tch::Tch`] (feature `tch`): libtorch through tch, with libtorch's autograd; CPU, and CUDA
+//!   in binaries that link libtorch's CUDA library (the `phi` package's `cuda` feature).
 
 use std::fmt::Debug;
 use std::ops::Range;
