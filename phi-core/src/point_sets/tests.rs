@@ -185,3 +185,24 @@ fn set_distances_measure_a_translation() {
         ));
     }
 }
+
+#[test]
+fn the_host_sinkhorn_divergence_vanishes_on_equal_sets_and_checks_its_inputs() {
+    let options = SinkhornOptions::new(0.01);
+    let a = cloud(40, 0.3, 0.0);
+    let same = sinkhorn_divergence_host(&a, &a, 2, &options).unwrap();
+    assert!(same.abs() < 1e-9, "S(a, a) = {same}");
+    // A rigid shift by s: S tends to ½|s|² as ε → 0 and stays below it (entropic blur).
+    let s = 0.05f32;
+    let b: Vec<f32> = a.iter().map(|x| x + s).collect();
+    let shifted = sinkhorn_divergence_host(&a, &b, 2, &options).unwrap();
+    let half_w2 = 0.5 * 2.0 * f64::from(s) * f64::from(s);
+    assert!(shifted > 0.5 * half_w2 && shifted <= half_w2 * (1.0 + 1e-6), "{shifted} vs {half_w2}");
+    for (x, y, d) in [(&a[..0], &a[..], 2), (&a[..3], &a[..], 2), (&a[..], &a[..], 0)] {
+        assert!(sinkhorn_divergence_host(x, y, d, &options).is_err());
+    }
+    let mut bad = a.clone();
+    bad[5] = f32::NAN;
+    assert!(sinkhorn_divergence_host(&bad, &a, 2, &options).is_err());
+    assert!(sinkhorn_divergence_host(&a, &a, 2, &SinkhornOptions::new(0.0)).is_err());
+}
