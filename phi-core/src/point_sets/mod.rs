@@ -3,8 +3,9 @@
 //! A point set is `[N, d]` in domain units; two sets may differ in size except where a function
 //! pairs point `i` with point `i`. The losses ([`l2_loss`], [`sinkhorn_divergence`]) are built from
 //! tensor operations and return a one-element tensor `[1]`, so they are differentiable on the
-//! autodiff backends; the metrics ([`chamfer_distance`], [`set_distances`]) run on host data and
-//! report how far a simulated liquid is from a target or a rollout from its ground truth.
+//! autodiff backends; the metrics ([`chamfer_distance`], [`set_distances`], the exact
+//! [`earth_movers_distance`]) run on host data and report how far a simulated liquid is from a
+//! target or a rollout from its ground truth.
 //!
 //! ```
 //! use phi_core::Backend;
@@ -22,10 +23,12 @@
 //! ```
 
 mod chamfer;
+mod emd;
 mod l2;
 mod sinkhorn;
 
 pub use chamfer::chamfer_distance;
+pub use emd::{EmdSolver, GroundCost, SolveStats, earth_movers_distance};
 pub use l2::l2_loss;
 pub use sinkhorn::{SinkhornOptions, sinkhorn_divergence, sinkhorn_divergence_host};
 
