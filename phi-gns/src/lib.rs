@@ -10,8 +10,11 @@
 //!   and Adam.
 //! - [`rollout`]: a model run forward from ground-truth frames, kinematic particles following the
 //!   ground truth.
+//! - [`eval`]: the thesis's metrics (MSE-acc 1, MSE 20, MSE 400, EMD) and more, per trajectory
+//!   and per model.
 
 pub mod data;
+pub mod eval;
 pub mod graph;
 pub mod model;
 pub mod rollout;

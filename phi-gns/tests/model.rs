@@ -1,6 +1,7 @@
-//! Integration tests of `phi_gns::model` and `phi_gns::rollout`, with modules by topic. Every
-//! backend is checked against `reference.rs`, an f64 forward pass of the documented layout
-//! written on the host, and against a PyTorch implementation through a committed fixture.
+//! Integration tests of `phi_gns::model`, `phi_gns::rollout` and `phi_gns::eval`, with modules
+//! by topic. Every backend is checked against `reference.rs`, an f64 forward pass of the
+//! documented layout written on the host, and against a PyTorch implementation through a
+//! committed fixture.
 
 #[path = "model/batching.rs"]
 mod batching;
@@ -8,6 +9,8 @@ mod batching;
 mod common;
 #[path = "model/conformance.rs"]
 mod conformance;
+#[path = "model/eval.rs"]
+mod eval;
 #[path = "model/files.rs"]
 mod files;
 #[path = "model/gradients.rs"]

@@ -14,9 +14,9 @@
 //! weights to the fast forward-only host backend for it.
 
 use crate::data::Trajectory;
-use crate::model::{Gns, GnsKernels, GraphBatch, ModelError};
-use crate::rollout::{RolloutRange, input_window, position_mse, rollout};
-use crate::train::{non_kinematic_mask, one_step_loss};
+use crate::eval::mse_acc1;
+use crate::model::{Gns, GnsKernels, ModelError};
+use crate::rollout::{RolloutRange, position_mse, rollout};
 
 /// The result of one screening.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -44,7 +44,6 @@ pub fn screen<B: GnsKernels>(
     device: &B::Device,
 ) -> Result<Screening, ModelError> {
     let c = model.spec().config.input_velocities;
-    let dim = model.spec().config.dim as f64;
     if trajectories.is_empty() {
         return Err(ModelError::Input {
             what: "screening",
@@ -65,24 +64,9 @@ pub fn screen<B: GnsKernels>(
                 ),
             });
         }
-        let mask = non_kinematic_mask::<B>(
-            &trajectory.particle_type,
-            &model.spec().kinematic_types,
-            device,
-        )?;
-        for t in (c..frames - 1).step_by(window_stride.max(1)) {
-            let window = input_window(trajectory, t, c);
-            let batch =
-                GraphBatch::from_host(&window, &trajectory.particle_type, model.spec(), device)?;
-            let next = phi_core::Tensor::from_slice(
-                trajectory.frame(t + 1),
-                &[trajectory.particles, trajectory.dim],
-                device,
-            )?;
-            let loss = one_step_loss(model, &batch, &next, &mask)?.to_scalar()?;
-            acc_sum += f64::from(loss) / dim;
-            windows += 1;
-        }
+        let (mse, count) = mse_acc1(model, trajectory, window_stride, device)?;
+        acc_sum += mse * count as f64;
+        windows += count;
         let steps = rollout_steps.min(frames - 1 - c);
         used_steps = used_steps.min(steps);
         let kinematic: Vec<bool> = trajectory

@@ -1,0 +1,109 @@
+//! A model's evaluations over a split summed up: the row of table B.1 and the bands of fig. 5.7.
+
+use serde::{Deserialize, Serialize};
+
+use super::trajectory::TrajectoryEvaluation;
+
+/// A model's metrics averaged over the evaluated trajectories. A rollout metric is `null`
+/// (infinite) when any trajectory's rollout blew up; `blown_up` counts them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelSummary {
+    /// Trajectories evaluated.
+    pub trajectories: usize,
+    /// Of which whose full rollout blew up.
+    pub blown_up: usize,
+    /// MSE-acc 1 (normalised acceleration units²).
+    pub mse_acc1: f64,
+    /// MSE 20 (stored units²).
+    pub mse20: Option<f64>,
+    /// MSE 400 (stored units²).
+    pub mse400: Option<f64>,
+    /// EMD (ground-cost units).
+    pub emd: Option<f64>,
+    /// Sinkhorn divergence (stored units²).
+    pub sinkhorn: Option<f64>,
+    /// Relative kinetic-energy error (a fraction).
+    pub kinetic_energy_error: Option<f64>,
+    /// Predicted over true mean neighbour count.
+    pub density_ratio: Option<f64>,
+}
+
+/// The mean of `values` when every one is present, `None` otherwise (or without values).
+fn mean_of_all(values: impl Iterator<Item = Option<f64>>) -> Option<f64> {
+    let mut sum = 0.0;
+    let mut count = 0usize;
+    for v in values {
+        sum += v?;
+        count += 1;
+    }
+    (count > 0).then(|| sum / count as f64)
+}
+
+impl ModelSummary {
+    /// The summary of `evaluations` (at least one).
+    pub fn of(evaluations: &[TrajectoryEvaluation]) -> Self {
+        let n = evaluations.len();
+        let of =
+            |f: fn(&TrajectoryEvaluation) -> Option<f64>| mean_of_all(evaluations.iter().map(f));
+        ModelSummary {
+            trajectories: n,
+            blown_up: evaluations
+                .iter()
+                .filter(|e| e.failed_step.is_some())
+                .count(),
+            mse_acc1: evaluations.iter().map(|e| e.mse_acc1).sum::<f64>() / n.max(1) as f64,
+            mse20: of(|e| e.mse20),
+            mse400: of(|e| e.mse400),
+            emd: of(|e| e.emd),
+            sinkhorn: of(|e| e.sinkhorn),
+            kinetic_energy_error: of(|e| e.kinetic_energy_error),
+            density_ratio: of(|e| e.density_ratio),
+        }
+    }
+}
+
+/// A per-frame curve over the trajectories: at each frame the mean, minimum and maximum over
+/// the trajectories that reached it (fig. 5.7's line and shaded range).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Band {
+    /// The dataset frame.
+    pub frame: Vec<usize>,
+    /// The mean over the trajectories.
+    pub mean: Vec<f64>,
+    /// The minimum.
+    pub min: Vec<f64>,
+    /// The maximum.
+    pub max: Vec<f64>,
+    /// How many trajectories reached the frame (fewer where a rollout blew up earlier).
+    pub count: Vec<usize>,
+}
+
+impl Band {
+    /// The band of the curve `curve(e)` (aligned with `e.curves.frame`) over `evaluations`.
+    pub fn of(
+        evaluations: &[TrajectoryEvaluation],
+        curve: fn(&TrajectoryEvaluation) -> &[f64],
+    ) -> Self {
+        let longest = evaluations
+            .iter()
+            .max_by_key(|e| e.curves.frame.len())
+            .map(|e| e.curves.frame.clone())
+            .unwrap_or_default();
+        let mut band = Band::default();
+        for (i, &frame) in longest.iter().enumerate() {
+            let values: Vec<f64> = evaluations
+                .iter()
+                .filter_map(|e| curve(e).get(i).copied())
+                .collect();
+            band.frame.push(frame);
+            band.mean
+                .push(values.iter().sum::<f64>() / values.len() as f64);
+            band.min
+                .push(values.iter().copied().fold(f64::INFINITY, f64::min));
+            band.max
+                .push(values.iter().copied().fold(f64::NEG_INFINITY, f64::max));
+            band.count.push(values.len());
+        }
+        band
+    }
+}

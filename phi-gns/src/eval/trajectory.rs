@@ -1,0 +1,398 @@
+//! One test trajectory evaluated: the thesis's four metrics and the extra ones, with their
+//! curves over the frames of the full rollout.
+
+use phi_core::point_sets::{
+    GroundCost, SinkhornOptions, earth_movers_distance, sinkhorn_divergence_host,
+};
+use serde::{Deserialize, Serialize};
+
+use super::EvalError;
+use super::metrics::{kinetic_energy, liquid_positions, mean_neighbour_count};
+use crate::data::Trajectory;
+use crate::model::{Gns, GnsKernels, GraphBatch, ModelError};
+use crate::rollout::{RolloutRange, input_window, position_mse, rollout};
+use crate::train::{non_kinematic_mask, one_step_loss};
+
+/// What an evaluation computes beyond the model and the data.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct EvalOptions {
+    /// The length of the short rollouts of MSE 20 (the thesis: 20).
+    pub short_rollout: usize,
+    /// The ground cost of the EMD.
+    pub ground_cost: EmdCost,
+    /// The Sinkhorn divergence's `ε` (stored units², for the cost `½|x − y|²`).
+    pub sinkhorn_epsilon: f32,
+    /// The Sinkhorn divergence of every this many predicted frames (the last one always), 0 for
+    /// none: it costs far more than the EMD.
+    pub sinkhorn_every: usize,
+    /// The radius of the neighbour counts of the density (stored units).
+    pub density_radius: f64,
+}
+
+impl EvalOptions {
+    /// The thesis's MSE 20, the squared-Euclidean EMD, the Sinkhorn divergence at `ε = 10⁻⁴`
+    /// every 100 frames, and neighbour counts within `density_radius` (the model's
+    /// connectivity radius is the natural choice).
+    pub fn new(density_radius: f64) -> Self {
+        EvalOptions {
+            short_rollout: 20,
+            ground_cost: EmdCost::SquaredEuclidean,
+            sinkhorn_epsilon: 1e-4,
+            sinkhorn_every: 100,
+            density_radius,
+        }
+    }
+}
+
+/// The EMD's ground cost, as the evaluation files name it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EmdCost {
+    /// `|x − y|²` (POT's `ot.dist` default; what the thesis's EMD used).
+    SquaredEuclidean,
+    /// `|x − y|`.
+    Euclidean,
+}
+
+impl From<EmdCost> for GroundCost {
+    fn from(cost: EmdCost) -> Self {
+        match cost {
+            EmdCost::SquaredEuclidean => GroundCost::SquaredEuclidean,
+            EmdCost::Euclidean => GroundCost::Euclidean,
+        }
+    }
+}
+
+/// The per-frame curves of the full rollout, one value per predicted frame (frames
+/// `start + 1 ..`), up to the frame before a blow-up.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Curves {
+    /// The dataset frame of each entry.
+    pub frame: Vec<usize>,
+    /// Position MSE over the liquid particles and dimensions (stored units²).
+    pub mse: Vec<f64>,
+    /// The EMD between the predicted and the true liquid particles (ground-cost units).
+    pub emd: Vec<f64>,
+    /// The Sinkhorn divergence where computed (stored units²), else `null`.
+    pub sinkhorn: Vec<Option<f64>>,
+    /// Kinetic energy per liquid particle of the prediction and of the truth
+    /// ([`kinetic_energy`], stored units² per frame²).
+    pub kinetic_energy_predicted: Vec<f64>,
+    /// See `kinetic_energy_predicted`.
+    pub kinetic_energy_true: Vec<f64>,
+    /// Mean neighbour count of a liquid particle, prediction and truth.
+    pub density_predicted: Vec<f64>,
+    /// See `density_predicted`.
+    pub density_true: Vec<f64>,
+}
+
+/// One trajectory's evaluation. A metric over a rollout that blew up (a non-finite predicted
+/// position) is `null`: it is infinite, and JSON has no infinity.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrajectoryEvaluation {
+    /// The trajectory's index in its split.
+    pub index: usize,
+    /// The trajectory's generator seed (checked against the dataset when reused).
+    pub seed: u64,
+    /// Particles, of which liquid (the metrics' particles).
+    pub particles: usize,
+    /// See `particles`.
+    pub liquid_particles: usize,
+    /// The last ground-truth frame of the full rollout's input window (`C`).
+    pub start: usize,
+    /// MSE-acc 1: eq. 5.1 averaged over every one-step window (normalised acceleration units²,
+    /// per dimension).
+    pub mse_acc1: f64,
+    /// The one-step windows: latest input frames `C ..= F − 2`.
+    pub acc_windows: usize,
+    /// MSE 20: the mean over the short rollouts of their position MSE.
+    pub mse20: Option<f64>,
+    /// The short rollouts: from frames `C, C + 20, …` while 20 frames follow.
+    pub short_windows: usize,
+    /// MSE 400: the position MSE of the full rollout, mean over its frames.
+    pub mse400: Option<f64>,
+    /// The mean of the EMD curve.
+    pub emd: Option<f64>,
+    /// The mean of the computed Sinkhorn divergences (`null` when none was asked for).
+    pub sinkhorn: Option<f64>,
+    /// `Σ_t |KE_pred − KE_true| / Σ_t KE_true` over the full rollout (a fraction).
+    pub kinetic_energy_error: Option<f64>,
+    /// `mean_t density_pred / mean_t density_true`: above 1, the model compresses the liquid.
+    pub density_ratio: Option<f64>,
+    /// The step at which the full rollout blew up (`null` when it did not).
+    pub failed_step: Option<usize>,
+    /// The per-frame curves.
+    pub curves: Curves,
+}
+
+/// Evaluates `model` on `trajectory`: every one-step window (MSE-acc 1), the short rollouts
+/// (MSE 20) and the full rollout from frame `C` with its per-frame curves (MSE 400, EMD,
+/// Sinkhorn divergence, kinetic energy, density).
+///
+/// The first short rollout is the first `short_rollout` steps of the full rollout, which the
+/// model computes identically, so it is taken from there.
+///
+/// # Errors
+/// [`ModelError::Input`] (as [`EvalError::Model`]) for a trajectory too short for a window and
+/// a target; [`EvalError::Input`] for one without liquid particles; model errors other than a
+/// blow-up; metric errors.
+pub fn evaluate_trajectory<B: GnsKernels>(
+    model: &Gns<B>,
+    trajectory: &Trajectory,
+    options: &EvalOptions,
+    device: &B::Device,
+) -> Result<TrajectoryEvaluation, EvalError> {
+    let spec = model.spec();
+    let c = spec.config.input_velocities;
+    let frames = trajectory.frames;
+    let liquid: Vec<bool> = trajectory
+        .particle_type
+        .iter()
+        .map(|t| !spec.kinematic_types.contains(t))
+        .collect();
+    let liquid_particles = liquid.iter().filter(|l| **l).count();
+    if liquid_particles == 0 {
+        return Err(EvalError::Input {
+            what: "trajectory",
+            reason: format!("trajectory {} has no liquid particles", trajectory.index),
+        });
+    }
+    if options.short_rollout == 0 {
+        return Err(EvalError::Input {
+            what: "short_rollout",
+            reason: "the short rollouts of MSE 20 need at least one step".into(),
+        });
+    }
+
+    let (mse_acc1, acc_windows) = mse_acc1(model, trajectory, 1, device)?;
+    let full = full_rollout(model, trajectory, &liquid, options, device)?;
+    let steps = frames - 1 - c;
+    let failed = full.failed_step;
+
+    // Short rollouts from C, C + S, ... while S frames follow; the first is the full rollout's.
+    let s = options.short_rollout;
+    let starts: Vec<usize> = (c..)
+        .step_by(s)
+        .take_while(|start| start + s < frames)
+        .collect();
+    let mut short_sum = Some(0.0f64);
+    for (k, &start) in starts.iter().enumerate() {
+        let mse = if k == 0 {
+            (full.curves.mse.len() >= s)
+                .then(|| full.curves.mse[..s].iter().sum::<f64>() / s as f64)
+        } else {
+            rollout_mse(
+                model,
+                trajectory,
+                &liquid,
+                RolloutRange { start, steps: s },
+                device,
+            )?
+        };
+        short_sum = short_sum.zip(mse).map(|(a, b)| a + b);
+    }
+    let mse20 = (!starts.is_empty())
+        .then_some(short_sum)
+        .flatten()
+        .map(|sum| sum / starts.len() as f64);
+
+    let curves = full.curves;
+    let complete = failed.is_none() && curves.mse.len() == steps;
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let sinkhorns: Vec<f64> = curves.sinkhorn.iter().flatten().copied().collect();
+    let (ke_error, density_ratio) = if complete {
+        let diff: f64 = curves
+            .kinetic_energy_predicted
+            .iter()
+            .zip(&curves.kinetic_energy_true)
+            .map(|(p, t)| (p - t).abs())
+            .sum();
+        let truth: f64 = curves.kinetic_energy_true.iter().sum();
+        let density_true = mean(&curves.density_true);
+        (
+            (truth > 0.0).then(|| diff / truth),
+            (density_true > 0.0).then(|| mean(&curves.density_predicted) / density_true),
+        )
+    } else {
+        (None, None)
+    };
+    Ok(TrajectoryEvaluation {
+        index: trajectory.index,
+        seed: trajectory.seed,
+        particles: trajectory.particles,
+        liquid_particles,
+        start: c,
+        mse_acc1,
+        acc_windows,
+        mse20,
+        short_windows: starts.len(),
+        mse400: complete.then(|| mean(&curves.mse)),
+        emd: complete.then(|| mean(&curves.emd)),
+        sinkhorn: (complete && !sinkhorns.is_empty()).then(|| mean(&sinkhorns)),
+        kinetic_energy_error: ke_error,
+        density_ratio,
+        failed_step: failed,
+        curves,
+    })
+}
+
+/// MSE-acc 1 of `model` on `trajectory`: eq. 5.1 (no noise) per window, divided by the
+/// dimension, averaged over the windows whose latest input frame is `C, C + stride, …, F − 2`.
+/// Returns the mean and the number of windows.
+///
+/// # Errors
+/// Model errors; [`ModelError::Input`] for a trajectory without a window and a target.
+pub fn mse_acc1<B: GnsKernels>(
+    model: &Gns<B>,
+    trajectory: &Trajectory,
+    stride: usize,
+    device: &B::Device,
+) -> Result<(f64, usize), ModelError> {
+    let spec = model.spec();
+    let c = spec.config.input_velocities;
+    let frames = trajectory.frames;
+    if frames < c + 2 {
+        return Err(ModelError::Input {
+            what: "trajectory",
+            reason: format!(
+                "a trajectory of {frames} frames has no window of {} frames and a target",
+                c + 1
+            ),
+        });
+    }
+    let mask = non_kinematic_mask::<B>(&trajectory.particle_type, &spec.kinematic_types, device)?;
+    let dim = spec.config.dim as f64;
+    let (mut sum, mut windows) = (0.0f64, 0usize);
+    for t in (c..frames - 1).step_by(stride.max(1)) {
+        let window = input_window(trajectory, t, c);
+        let batch = GraphBatch::from_host(&window, &trajectory.particle_type, spec, device)?;
+        let next = phi_core::Tensor::from_slice(
+            trajectory.frame(t + 1),
+            &[trajectory.particles, trajectory.dim],
+            device,
+        )?;
+        let loss = one_step_loss(model, &batch, &next, &mask)?.to_scalar()?;
+        sum += f64::from(loss) / dim;
+        windows += 1;
+    }
+    Ok((sum / windows as f64, windows))
+}
+
+/// The position MSE of a rollout over `range`, mean over its frames; `None` when it blows up.
+fn rollout_mse<B: GnsKernels>(
+    model: &Gns<B>,
+    trajectory: &Trajectory,
+    liquid: &[bool],
+    range: RolloutRange,
+    device: &B::Device,
+) -> Result<Option<f64>, EvalError> {
+    let kinematic: Vec<bool> = liquid.iter().map(|l| !l).collect();
+    let mut sum = 0.0;
+    let ran = rollout(model, trajectory, range, device, |step, positions| {
+        let truth = trajectory.frame(range.start + step);
+        sum += position_mse(positions, truth, &kinematic, trajectory.dim);
+        Ok(())
+    });
+    match ran {
+        Ok(()) => Ok(Some(sum / range.steps as f64)),
+        Err(ModelError::NonFinitePrediction { .. }) => Ok(None),
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// The full rollout's curves, and the step at which it blew up.
+struct FullRollout {
+    curves: Curves,
+    failed_step: Option<usize>,
+}
+
+/// Rolls out from frame `C` to the last frame, computing the per-frame metrics as frames come.
+fn full_rollout<B: GnsKernels>(
+    model: &Gns<B>,
+    trajectory: &Trajectory,
+    liquid: &[bool],
+    options: &EvalOptions,
+    device: &B::Device,
+) -> Result<FullRollout, EvalError> {
+    let c = model.spec().config.input_velocities;
+    let dim = trajectory.dim;
+    let range = RolloutRange::full(c, trajectory.frames);
+    let kinematic: Vec<bool> = liquid.iter().map(|l| !l).collect();
+    let sinkhorn = SinkhornOptions::new(options.sinkhorn_epsilon);
+    let mut curves = Curves::default();
+    let mut previous = trajectory.frame(c).to_vec();
+    let mut metric_error: Option<EvalError> = None;
+    let ran = rollout(model, trajectory, range, device, |step, positions| {
+        let frame = c + step;
+        let truth = trajectory.frame(frame);
+        let outcome = (|| -> Result<(), EvalError> {
+            let predicted_liquid = liquid_positions(positions, liquid, dim);
+            let true_liquid = liquid_positions(truth, liquid, dim);
+            curves.frame.push(frame);
+            curves
+                .mse
+                .push(position_mse(positions, truth, &kinematic, dim));
+            curves.emd.push(earth_movers_distance(
+                &predicted_liquid,
+                &true_liquid,
+                dim,
+                options.ground_cost.into(),
+            )?);
+            let every = options.sinkhorn_every;
+            curves
+                .sinkhorn
+                .push(if every > 0 && (step % every == 0 || step == range.steps) {
+                    Some(sinkhorn_divergence_host(
+                        &predicted_liquid,
+                        &true_liquid,
+                        dim,
+                        &sinkhorn,
+                    )?)
+                } else {
+                    None
+                });
+            curves
+                .kinetic_energy_predicted
+                .push(kinetic_energy(&previous, positions, liquid, dim));
+            curves.kinetic_energy_true.push(kinetic_energy(
+                trajectory.frame(frame - 1),
+                truth,
+                liquid,
+                dim,
+            ));
+            curves.density_predicted.push(mean_neighbour_count(
+                positions,
+                liquid,
+                dim,
+                options.density_radius,
+            )?);
+            curves.density_true.push(mean_neighbour_count(
+                truth,
+                liquid,
+                dim,
+                options.density_radius,
+            )?);
+            previous.copy_from_slice(positions);
+            Ok(())
+        })();
+        outcome.map_err(|e| {
+            metric_error = Some(e);
+            ModelError::Input {
+                what: "evaluation",
+                reason: "a metric failed".into(),
+            }
+        })
+    });
+    if let Some(e) = metric_error {
+        return Err(e);
+    }
+    let failed_step = match ran {
+        Ok(()) => None,
+        Err(ModelError::NonFinitePrediction { step, .. }) => Some(step),
+        Err(e) => return Err(e.into()),
+    };
+    Ok(FullRollout {
+        curves,
+        failed_step,
+    })
+}

@@ -1,0 +1,252 @@
+//! The evaluation metrics: hand-computed kinetic energies and neighbour counts, and the
+//! bookkeeping of a trajectory's evaluation checked against independent rollouts (MSE 20 from
+//! rollouts started at the stated frames, MSE 400 the mean of its curve, the EMD bounded by the
+//! identity assignment), the summary of a blown-up rollout, and the bands over trajectories.
+
+use phi_core::backend::ndarray::NdArray;
+use phi_core::{Backend, Tensor};
+use phi_gns::data::{LIQUID, OBSTACLE, Trajectory};
+use phi_gns::eval::metrics::{kinetic_energy, liquid_positions, mean_neighbour_count};
+use phi_gns::eval::{Band, EvalOptions, ModelSummary, evaluate_trajectory, mse_acc1};
+use phi_gns::model::{Gns, Parameters};
+use phi_gns::rollout::{RolloutRange, position_mse, rollout_positions};
+
+use crate::common::{self, Rng, perturbed};
+
+/// `C` of the models here (the thesis' 5).
+const C: usize = 5;
+
+/// 3 obstacle particles sliding along x, then 8 liquid particles falling with a little noise,
+/// `frames` frames in 2D inside the bounds.
+fn trajectory(frames: usize) -> Trajectory {
+    let mut rng = Rng::new(11);
+    let mut start: Vec<([f64; 2], i64)> = (0..3)
+        .map(|k| ([0.3 + 0.01 * k as f64, 0.3], OBSTACLE))
+        .collect();
+    for i in 0..8 {
+        start.push((
+            [0.3 + 0.01 * (i % 4) as f64, 0.315 + 0.01 * (i / 4) as f64],
+            LIQUID,
+        ));
+    }
+    let mut position = Vec::new();
+    for t in 0..frames {
+        for (p, kind) in &start {
+            let t = t as f64;
+            let (x, y) = if *kind == OBSTACLE {
+                (p[0] + 3e-4 * t, p[1])
+            } else {
+                (
+                    p[0] + 2e-4 * t + 1e-4 * (rng.uniform() - 0.5),
+                    p[1] - 0.2e-4 * t * t,
+                )
+            };
+            position.extend([x as f32, y as f32]);
+        }
+    }
+    let types = start.iter().map(|(_, t)| *t).collect();
+    Trajectory::new(2, position, types, 0, 0).unwrap()
+}
+
+fn small_model() -> Gns<NdArray> {
+    let spec = common::spec(common::config(16, 16, 2, 2), 3);
+    let params = Parameters::init(&spec.config, spec.seed, &NdArray::default_device());
+    Gns::new(spec, perturbed(&params, 6)).unwrap()
+}
+
+#[test]
+fn kinetic_energy_of_a_uniform_motion_is_half_the_squared_speed() {
+    // Three particles moving by (3, 4)·1e-3 per frame, one kinematic one standing still.
+    let previous = [0.1f32, 0.2, 0.5, 0.5, 0.3, 0.4, 0.7, 0.7];
+    let current: Vec<f32> = previous
+        .chunks(2)
+        .enumerate()
+        .flat_map(|(i, p)| {
+            if i == 3 {
+                [p[0], p[1]]
+            } else {
+                [p[0] + 3e-3, p[1] + 4e-3]
+            }
+        })
+        .collect();
+    let liquid = [true, true, true, false];
+    let ke = kinetic_energy(&previous, &current, &liquid, 2);
+    approx::assert_relative_eq!(ke, 0.5 * 25e-6, max_relative = 1e-4);
+    // Only kinematic particles: no liquid, no energy.
+    assert_eq!(kinetic_energy(&previous, &current, &[false; 4], 2), 0.0);
+}
+
+#[test]
+fn neighbour_counts_of_a_lattice_are_those_counted_by_hand() {
+    // A 3×3 lattice of spacing h with a radius between h and √2 h: corners have 2 neighbours,
+    // edges 3, the centre 4; a far kinematic particle does not count.
+    let h = 0.01f32;
+    let mut frame = Vec::new();
+    for j in 0..3 {
+        for i in 0..3 {
+            frame.extend([0.2 + h * i as f32, 0.2 + h * j as f32]);
+        }
+    }
+    frame.extend([0.2 + h, 0.2 + h]);
+    let mut liquid = vec![true; 9];
+    liquid.push(false);
+    let count = mean_neighbour_count(&frame, &liquid, 2, 1.2 * f64::from(h)).unwrap();
+    approx::assert_relative_eq!(
+        count,
+        (4.0 * 2.0 + 4.0 * 3.0 + 4.0) / 9.0,
+        max_relative = 1e-12
+    );
+    // Within √2 h < R < 2h the diagonals join: corners 3, edges 5, centre 8.
+    let count = mean_neighbour_count(&frame, &liquid, 2, 1.5 * f64::from(h)).unwrap();
+    approx::assert_relative_eq!(
+        count,
+        (4.0 * 3.0 + 4.0 * 5.0 + 8.0) / 9.0,
+        max_relative = 1e-12
+    );
+    assert_eq!(liquid_positions(&frame, &liquid, 2).len(), 18);
+}
+
+#[test]
+fn a_trajectory_evaluation_agrees_with_independent_rollouts() {
+    let device = NdArray::default_device();
+    let model = small_model();
+    let frames = 32;
+    let trajectory = trajectory(frames);
+    let kinematic: Vec<bool> = trajectory
+        .particle_type
+        .iter()
+        .map(|t| *t == OBSTACLE)
+        .collect();
+    let mut options = EvalOptions::new(0.015);
+    options.short_rollout = 10;
+    options.sinkhorn_every = 13;
+    let eval = evaluate_trajectory(&model, &trajectory, &options, &device).unwrap();
+
+    let steps = frames - 1 - C;
+    assert_eq!(eval.failed_step, None);
+    assert_eq!(eval.liquid_particles, 8);
+    assert_eq!(eval.acc_windows, frames - 1 - C);
+    assert_eq!(eval.curves.frame, (C + 1..frames).collect::<Vec<_>>());
+    for curve in [
+        &eval.curves.mse,
+        &eval.curves.emd,
+        &eval.curves.kinetic_energy_predicted,
+        &eval.curves.kinetic_energy_true,
+        &eval.curves.density_predicted,
+        &eval.curves.density_true,
+    ] {
+        assert_eq!(curve.len(), steps);
+    }
+
+    // MSE 400 is the mean of the per-frame curve, which is the MSE of an independent rollout.
+    let full =
+        rollout_positions(&model, &trajectory, RolloutRange::full(C, frames), &device).unwrap();
+    let per_frame = trajectory.particles * 2;
+    for (k, mse) in eval.curves.mse.iter().enumerate() {
+        let predicted = &full[k * per_frame..(k + 1) * per_frame];
+        let expected = position_mse(predicted, trajectory.frame(C + 1 + k), &kinematic, 2);
+        assert_eq!(mse.to_bits(), expected.to_bits(), "frame {}", C + 1 + k);
+        // The identity assignment is one transport plan: EMD ≤ Σ|p − t|² / L = dim · MSE.
+        assert!(
+            eval.curves.emd[k] <= 2.0 * mse * (1.0 + 1e-9),
+            "frame {}",
+            C + 1 + k
+        );
+    }
+    let mean = eval.curves.mse.iter().sum::<f64>() / steps as f64;
+    approx::assert_relative_eq!(eval.mse400.unwrap(), mean, max_relative = 1e-15);
+
+    // MSE 20 (here 10): rollouts from frames C and C + 10 (C + 20 + 10 is past the end).
+    assert_eq!(eval.short_windows, 2);
+    let short = |start: usize| {
+        let range = RolloutRange { start, steps: 10 };
+        let predicted = rollout_positions(&model, &trajectory, range, &device).unwrap();
+        (0..10)
+            .map(|k| {
+                position_mse(
+                    &predicted[k * per_frame..(k + 1) * per_frame],
+                    trajectory.frame(start + 1 + k),
+                    &kinematic,
+                    2,
+                )
+            })
+            .sum::<f64>()
+            / 10.0
+    };
+    let expected = 0.5 * (short(C) + short(C + 10));
+    approx::assert_relative_eq!(eval.mse20.unwrap(), expected, max_relative = 1e-12);
+
+    // MSE-acc 1 over every window equals the mean over strided windows combined.
+    let (acc, windows) = mse_acc1(&model, &trajectory, 1, &device).unwrap();
+    assert_eq!(
+        (acc.to_bits(), windows),
+        (eval.mse_acc1.to_bits(), eval.acc_windows)
+    );
+
+    // The Sinkhorn divergence at steps 13, 26 and the last one.
+    let computed: Vec<usize> = eval
+        .curves
+        .sinkhorn
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.is_some())
+        .map(|(k, _)| k + 1)
+        .collect();
+    assert_eq!(computed, vec![13, 26]);
+    assert!(eval.sinkhorn.unwrap() >= 0.0);
+
+    // The kinetic energies of the truth are those of its frames.
+    let truth_ke = kinetic_energy(
+        trajectory.frame(C),
+        trajectory.frame(C + 1),
+        &kinematic.iter().map(|k| !k).collect::<Vec<_>>(),
+        2,
+    );
+    assert_eq!(
+        eval.curves.kinetic_energy_true[0].to_bits(),
+        truth_ke.to_bits()
+    );
+    assert!(eval.kinetic_energy_error.unwrap() >= 0.0);
+    assert!(eval.density_ratio.unwrap() > 0.0);
+
+    // One trajectory: the summary is its evaluation, the band its curve with zero width.
+    let summary = ModelSummary::of(std::slice::from_ref(&eval));
+    assert_eq!(summary.mse400, eval.mse400);
+    assert_eq!(summary.blown_up, 0);
+    let band = Band::of(std::slice::from_ref(&eval), |e| &e.curves.mse);
+    assert_eq!(band.mean, eval.curves.mse);
+    assert_eq!(band.min, band.max);
+}
+
+#[test]
+fn a_blown_up_rollout_makes_the_rollout_metrics_infinite() {
+    let device = NdArray::default_device();
+    let model = small_model();
+    // A model whose decoder biases are NaN: the first prediction is not finite.
+    let params = model.params().map(|name, t| {
+        if name.starts_with("decoder.") && name.ends_with(".bias") {
+            Tensor::from_vec(vec![f32::NAN; t.numel()], &t.shape(), &t.device()).unwrap()
+        } else {
+            t.clone()
+        }
+    });
+    let blowing = Gns::new(model.spec().clone(), params).unwrap();
+    let trajectory = trajectory(30);
+    let eval =
+        evaluate_trajectory(&blowing, &trajectory, &EvalOptions::new(0.015), &device).unwrap();
+    assert_eq!(eval.failed_step, Some(1));
+    assert_eq!((eval.mse400, eval.emd, eval.mse20), (None, None, None));
+    assert!(eval.curves.mse.is_empty());
+
+    let fine = evaluate_trajectory(&model, &trajectory, &EvalOptions::new(0.015), &device).unwrap();
+    let summary = ModelSummary::of(&[fine.clone(), eval.clone()]);
+    assert_eq!(
+        (summary.blown_up, summary.mse400, summary.emd),
+        (1, None, None)
+    );
+    // The band covers the frames of the rollout that ran on, from it alone.
+    let band = Band::of(&[fine.clone(), eval], |e| &e.curves.mse);
+    assert_eq!(band.frame, fine.curves.frame);
+    assert!(band.count.iter().all(|&c| c == 1));
+    assert_eq!(band.mean, fine.curves.mse);
+}
