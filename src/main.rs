@@ -77,6 +77,9 @@ enum Command {
     /// Train a GNS on a dataset with a preset of configs/gns/ (1s, 1sn, 1snb, 2ss, 2si):
     /// checkpoints, screening on the validation split, exact resume.
     Train(phi::gns::train::TrainArgs),
+    /// Evaluate GNS models on a split as the thesis does (MSE-acc 1, MSE 20, MSE 400, EMD, and
+    /// more): tables, plots and a GIF of their rollouts side by side.
+    Eval(phi::gns::eval::EvalArgs),
 }
 
 fn main() -> Result<()> {
@@ -131,6 +134,7 @@ fn main() -> Result<()> {
         Command::Model { command } => phi::gns::init::run(command),
         Command::Rollout(args) => phi::gns::rollout::run(args),
         Command::Train(args) => phi::gns::train::run(args),
+        Command::Eval(args) => phi::gns::eval::run(args),
     }
 }
 

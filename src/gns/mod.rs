@@ -1,17 +1,21 @@
-//! `phi model ...`, `phi rollout` and `phi train`: model directories of Graph Network-based Simulators and
-//! their rollouts on the trajectories of a dataset (thesis section 5.4, fig. 5.8).
+//! `phi model ...`, `phi rollout`, `phi train` and `phi eval`: model directories of Graph
+//! Network-based Simulators, their rollouts on the trajectories of a dataset, their training and
+//! their evaluation (thesis sections 5.3–5.4).
 //!
 //! - [`init`]: `phi model init`, a model directory (`model.json`, `model.safetensors`) with
 //!   seeded random weights for a dataset;
 //! - [`rollout`]: `phi rollout`, a model run forward from ground-truth frames, with the
 //!   predictions, the truth, the per-frame position error and a GIF of both side by side;
-//! - [`train`]: `phi train`, a model trained on a dataset with a preset of `configs/gns/`.
+//! - [`train`]: `phi train`, a model trained on a dataset with a preset of `configs/gns/`;
+//! - [`eval`]: `phi eval`, models evaluated on a split with the thesis's metrics: tables,
+//!   plots and a GIF of their rollouts side by side.
 //!
 //! The files are those of [`phi_gns::model`] and [`phi_gns::data`]; `docs/gns.md` describes
 //! them and the commands. Neither command overwrites files it did not write: each recognises
 //! its own outputs by a key of the JSON file it writes first (see [`init::check_model_dir`] and
 //! [`rollout::check_rollout_dir`]).
 
+pub mod eval;
 pub mod init;
 pub mod rollout;
 pub mod train;

@@ -91,7 +91,7 @@ pub(super) fn tiny_dataset_with(
     write_metadata(dir, &metadata).unwrap();
 }
 
-fn init(data: &Path, out: &Path, extra: &[&str]) -> Output {
+pub(super) fn init(data: &Path, out: &Path, extra: &[&str]) -> Output {
     phi()
         .args(["model", "init", "--data"])
         .arg(data)
@@ -118,7 +118,7 @@ fn rollout(model: &Path, data: &Path, out: &Path, extra: &[&str]) -> Output {
 }
 
 /// The standard error of a run that must have failed.
-fn failed(output: Output) -> String {
+pub(super) fn failed(output: Output) -> String {
     assert!(
         !output.status.success(),
         "the command succeeded: {}",
@@ -127,7 +127,7 @@ fn failed(output: Output) -> String {
     String::from_utf8_lossy(&output.stderr).into_owned()
 }
 
-fn json(path: &Path) -> serde_json::Value {
+pub(super) fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 

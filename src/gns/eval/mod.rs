@@ -1,0 +1,815 @@
+//! `phi eval`: trained GNS models evaluated on a split of a dataset as the thesis does
+//! (section 5.4, table B.1, figs. 5.5–5.8), several models side by side.
+//!
+//! The metrics are those of [`phi_gns::eval`]. The output directory holds:
+//! - `eval.json`: the dataset, the split, the options and, per model, its directory, its
+//!   weights digest, its summary ([`ModelSummary`]) and the per-frame bands of MSE and EMD.
+//!   Written first (`"complete": false`), so that the directory is recognisably ours, and last;
+//! - `table.md` (the units of table B.1) and `table.csv` (raw values): one row per model;
+//! - `error_over_time.png` (fig. 5.7: MSE and EMD per frame, mean over the trajectories with
+//!   the min–max range), `metrics.png` (fig. 5.6) and, for models that come from a `phi train`
+//!   directory, `screening.png` (fig. 5.5: the validation curves of its `train.csv`);
+//! - `rollouts.gif` (fig. 5.8): one trajectory, the ground truth first and then every model, side
+//!   by side (2D datasets);
+//! - `cache/<model>/<split>_<index>.json`: each trajectory's evaluation, written as soon as it
+//!   is done and reused by a later run with the same model weights, dataset trajectory and
+//!   options, so that a killed evaluation resumes where it stopped. A cache entry of another
+//!   model, trajectory or options is an error naming both, never silently overwritten.
+//!
+//! Trajectories are evaluated in parallel (rayon) on the forward backend.
+
+mod plots;
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use anyhow::{Context, Result, bail};
+use phi_gns::data::{Dataset, METADATA_FILE};
+use phi_gns::eval::{
+    Band, EmdCost, EvalOptions, ModelSummary, TrajectoryEvaluation, evaluate_trajectory,
+};
+use phi_gns::model::{
+    GnsKernels, MODEL_FILE, ModelError, ModelSpec, WEIGHTS_FILE, load_model, read_spec,
+};
+use phi_gns::rollout::{RolloutRange, rollout};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::backends::BackendKind;
+use crate::dataset::render::DatasetRenderer;
+use crate::output::{FrameStyle, GifWriter, OutputError, RgbImage, side_by_side, write_atomic};
+
+/// The value of [`EvalRecord::format`].
+pub const EVAL_FORMAT: &str = "phi-eval";
+/// The value of [`CacheEntry::format`].
+pub const CACHE_FORMAT: &str = "phi-eval-trajectory";
+/// The record of an evaluation directory.
+pub const RECORD_FILE: &str = "eval.json";
+/// The table in the units of table B.1.
+pub const TABLE_MD: &str = "table.md";
+/// The table in raw values.
+pub const TABLE_CSV: &str = "table.csv";
+/// The per-trajectory results.
+pub const CACHE_DIR: &str = "cache";
+/// Fig. 5.7: MSE and EMD per frame.
+pub const ERROR_PLOT: &str = "error_over_time.png";
+/// Fig. 5.6: the metrics of table B.1 as bars.
+pub const METRICS_PLOT: &str = "metrics.png";
+/// Fig. 5.5: the screening curves of the training logs.
+pub const SCREENING_PLOT: &str = "screening.png";
+/// The rollouts of every model on one trajectory, beside the truth.
+pub const GIF_FILE: &str = "rollouts.gif";
+
+/// Columns of background between the panels of the GIF.
+const GIF_GAP: u32 = 6;
+
+/// The ground cost of the EMD on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum CostArg {
+    /// `|x − y|²` (POT's `ot.dist` default, what the thesis's EMD used).
+    Sqeuclidean,
+    /// `|x − y|`.
+    Euclidean,
+}
+
+/// `phi eval --model [NAME=]DIR ... --data DATASET --out DIR [options]`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct EvalArgs {
+    /// A model directory (model.json, model.safetensors) or a `phi train` directory (its best/
+    /// model and its train.csv), optionally named `NAME=DIR`; repeat for several models.
+    #[arg(long = "model", required = true, value_name = "[NAME=]DIR")]
+    pub models: Vec<String>,
+    /// The dataset directory.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// The split to evaluate on.
+    #[arg(long, default_value = "test")]
+    pub split: String,
+    /// Evaluate only the first N trajectories of the split [default: all].
+    #[arg(long)]
+    pub trajectories: Option<usize>,
+    /// The output directory.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// The backend [default: ndarray].
+    #[arg(long)]
+    pub backend: Option<BackendKind>,
+    /// Steps of the short rollouts of MSE 20.
+    #[arg(long, default_value_t = 20)]
+    pub short_rollout: usize,
+    /// The EMD's ground cost.
+    #[arg(long, value_enum, default_value_t = CostArg::Sqeuclidean)]
+    pub emd_cost: CostArg,
+    /// The Sinkhorn divergence's ε (stored units², cost ½|x − y|²).
+    #[arg(long, default_value_t = 1e-4)]
+    pub sinkhorn_epsilon: f32,
+    /// The Sinkhorn divergence every this many frames (0: none).
+    #[arg(long, default_value_t = 100)]
+    pub sinkhorn_every: usize,
+    /// The radius of the density's neighbour counts [default: the dataset's
+    /// default_connectivity_radius].
+    #[arg(long)]
+    pub density_radius: Option<f64>,
+    /// The trajectory of rollouts.gif (an index into the split).
+    #[arg(long, default_value_t = 0)]
+    pub gif_index: usize,
+    /// A GIF picture every this many frames (0: no GIF).
+    #[arg(long, default_value_t = 2)]
+    pub gif_every: usize,
+    /// Pixels per grid cell in the GIF.
+    #[arg(long, default_value_t = 4)]
+    pub pixels_per_cell: u32,
+}
+
+/// A model as the command line named it, resolved.
+#[derive(Debug, Clone)]
+pub struct ModelEntry {
+    /// Its name in tables and plots.
+    pub label: String,
+    /// The model directory (model.json, model.safetensors).
+    pub dir: PathBuf,
+    /// The `phi train` directory it comes from, if any (for its train.csv).
+    pub run: Option<PathBuf>,
+    /// Its model.json.
+    pub spec: ModelSpec,
+    /// A digest of model.json and model.safetensors: which weights a cache entry belongs to.
+    pub digest: String,
+}
+
+/// One model's part of `eval.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelRecord {
+    /// The model's name.
+    pub label: String,
+    /// The model directory.
+    pub dir: String,
+    /// The weights digest.
+    pub digest: String,
+    /// The metrics over the evaluated trajectories (`null` until done).
+    pub summary: Option<ModelSummary>,
+    /// Position MSE per frame over the trajectories.
+    pub mse_band: Option<Band>,
+    /// EMD per frame over the trajectories.
+    pub emd_band: Option<Band>,
+}
+
+/// `eval.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EvalRecord {
+    /// Always [`EVAL_FORMAT`].
+    pub format: String,
+    /// `phi eval` and its version.
+    pub made_by: String,
+    /// The dataset directory, as given.
+    pub dataset: String,
+    /// The split.
+    pub split: String,
+    /// The indices evaluated.
+    pub trajectories: Vec<usize>,
+    /// The metric options.
+    pub options: EvalOptions,
+    /// Whether every model was evaluated on every trajectory.
+    pub complete: bool,
+    /// The models, in command-line order.
+    pub models: Vec<ModelRecord>,
+    /// The trajectory of the GIF and its panels from left to right (`null` without a GIF).
+    pub gif: Option<GifRecord>,
+}
+
+/// What `rollouts.gif` shows.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GifRecord {
+    /// The trajectory's index in the split.
+    pub index: usize,
+    /// The panels from left to right: `ground truth`, then the models' names.
+    pub panels: Vec<String>,
+    /// The dataset frames shown.
+    pub frames: Vec<usize>,
+}
+
+/// `cache/<model>/<split>_<index>.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CacheEntry {
+    /// Always [`CACHE_FORMAT`].
+    pub format: String,
+    /// The model directory it was computed for.
+    pub model: String,
+    /// That model's weights digest.
+    pub digest: String,
+    /// The split.
+    pub split: String,
+    /// The options it was computed with.
+    pub options: EvalOptions,
+    /// The result.
+    pub evaluation: TrajectoryEvaluation,
+}
+
+/// What was checked before any evaluation.
+#[derive(Debug)]
+pub struct Plan {
+    dataset: Dataset,
+    models: Vec<ModelEntry>,
+    indices: Vec<usize>,
+    options: EvalOptions,
+}
+
+/// Resolves `[NAME=]DIR`: a model directory, or a `phi train` directory whose `best/` model
+/// is taken. The default name is the directory's (the training directory's for `best/` and
+/// `checkpoints/step-N/`, with `@step-N` for the latter).
+///
+/// # Errors
+/// A directory that is neither, or a model.json that does not read.
+pub fn resolve_model(arg: &str) -> Result<ModelEntry> {
+    let (name, path) = match arg.split_once('=') {
+        Some((name, path)) if !name.is_empty() && !Path::new(arg).exists() => {
+            (Some(name.to_string()), PathBuf::from(path))
+        }
+        _ => (None, PathBuf::from(arg)),
+    };
+    let file_name = |p: &Path| {
+        p.file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| p.display().to_string())
+    };
+    let (dir, run) = if path.join(MODEL_FILE).is_file() {
+        let base = file_name(&path);
+        let run = if base == phi_gns::train::checkpoint::BEST_DIR {
+            path.parent().map(Path::to_path_buf)
+        } else if base.starts_with("step-") {
+            path.parent().and_then(Path::parent).map(Path::to_path_buf)
+        } else {
+            None
+        };
+        (path.clone(), run.filter(|r| r.join("train.csv").is_file()))
+    } else if path.join("train.json").is_file() {
+        let best = path.join(phi_gns::train::checkpoint::BEST_DIR);
+        if !best.join(MODEL_FILE).is_file() {
+            bail!(
+                "--model {arg}: the training directory {} has no {}/ model yet (it is written \
+                 at the first screening); name a checkpoint instead: {}/checkpoints/step-…",
+                path.display(),
+                phi_gns::train::checkpoint::BEST_DIR,
+                path.display()
+            );
+        }
+        (best, Some(path.clone()))
+    } else {
+        bail!(
+            "--model {arg}: {} holds neither a model ({MODEL_FILE}) nor a `phi train` directory \
+             (train.json)",
+            path.display()
+        );
+    };
+    let label = name.unwrap_or_else(|| match &run {
+        Some(run) if dir != *run => {
+            let base = file_name(&dir);
+            if base == phi_gns::train::checkpoint::BEST_DIR {
+                file_name(run)
+            } else {
+                format!("{}@{base}", file_name(run))
+            }
+        }
+        _ => file_name(&dir),
+    });
+    let spec = read_spec(&dir)?;
+    let digest = model_digest(&dir)?;
+    Ok(ModelEntry {
+        label,
+        dir,
+        run,
+        spec,
+        digest,
+    })
+}
+
+/// A digest of a model directory's two files: CRC-32 of each and their lengths, in hex.
+fn model_digest(dir: &Path) -> Result<String> {
+    let mut parts = Vec::new();
+    for name in [MODEL_FILE, WEIGHTS_FILE] {
+        let path = dir.join(name);
+        let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
+        parts.push(format!("{:08x}-{}", crc32fast::hash(&bytes), bytes.len()));
+    }
+    Ok(parts.join(":"))
+}
+
+/// Checks everything before anything is written: each model's files and that it fits the
+/// dataset, distinct names, the split and the trajectory count, the options, and that the
+/// output directory is empty or one of ours.
+///
+/// # Errors
+/// Naming the option, file or key and what is wrong.
+pub fn plan(args: &EvalArgs) -> Result<Plan> {
+    let dataset = Dataset::open(&args.data)?;
+    let metadata_path = args.data.join(METADATA_FILE);
+    let mut models = Vec::with_capacity(args.models.len());
+    for arg in &args.models {
+        let entry = resolve_model(arg)?;
+        entry
+            .spec
+            .check_dataset(dataset.metadata(), &metadata_path)
+            .with_context(|| {
+                format!(
+                    "--model {arg} ({}) does not fit the dataset {}",
+                    entry.dir.display(),
+                    args.data.display()
+                )
+            })?;
+        if let Some(other) = models.iter().find(|m: &&ModelEntry| m.label == entry.label) {
+            bail!(
+                "--model {arg}: the name '{}' is taken by {}; name them: --model NAME=DIR",
+                entry.label,
+                other.dir.display()
+            );
+        }
+        if entry.label.contains(['/', '\\']) || entry.label.starts_with('.') {
+            bail!(
+                "--model {arg}: the name '{}' cannot be a folder name; name it: --model NAME=DIR",
+                entry.label
+            );
+        }
+        models.push(entry);
+    }
+    let count = dataset.split_len(&args.split)?;
+    if count == 0 {
+        bail!(
+            "{}: split '{}' has no trajectories",
+            args.data.display(),
+            args.split
+        );
+    }
+    let used = match args.trajectories {
+        Some(0) => bail!("--trajectories 0: nothing to evaluate"),
+        Some(n) if n > count => bail!(
+            "--trajectories {n}: split '{}' of {} has {count}",
+            args.split,
+            args.data.display()
+        ),
+        Some(n) => n,
+        None => count,
+    };
+    if args.gif_every > 0 && args.gif_index >= used {
+        bail!(
+            "--gif-index {}: only trajectories 0..{used} are evaluated",
+            args.gif_index
+        );
+    }
+    if args.short_rollout == 0 {
+        bail!("--short-rollout 0: the short rollouts need at least one step");
+    }
+    if !(args.sinkhorn_epsilon.is_finite() && args.sinkhorn_epsilon > 0.0) {
+        bail!(
+            "--sinkhorn-epsilon {}: must be positive and finite",
+            args.sinkhorn_epsilon
+        );
+    }
+    let radius = args
+        .density_radius
+        .unwrap_or(dataset.metadata().default_connectivity_radius);
+    if !(radius.is_finite() && radius > 0.0) {
+        bail!("--density-radius {radius}: must be positive and finite");
+    }
+    check_eval_dir(&args.out)?;
+    let options = EvalOptions {
+        short_rollout: args.short_rollout,
+        ground_cost: match args.emd_cost {
+            CostArg::Sqeuclidean => EmdCost::SquaredEuclidean,
+            CostArg::Euclidean => EmdCost::Euclidean,
+        },
+        sinkhorn_epsilon: args.sinkhorn_epsilon,
+        sinkhorn_every: args.sinkhorn_every,
+        density_radius: radius,
+    };
+    Ok(Plan {
+        dataset,
+        models,
+        indices: (0..used).collect(),
+        options,
+    })
+}
+
+/// Refuses an output directory that `phi eval` did not write: a file, or a non-empty directory
+/// without an `eval.json` of [`EVAL_FORMAT`].
+///
+/// # Errors
+/// Naming the directory.
+pub fn check_eval_dir(out: &Path) -> Result<()> {
+    if !out.exists() {
+        return Ok(());
+    }
+    if !out.is_dir() {
+        bail!("--out {}: exists and is not a directory", out.display());
+    }
+    let empty = std::fs::read_dir(out)
+        .with_context(|| format!("reading {}", out.display()))?
+        .next()
+        .is_none();
+    if empty {
+        return Ok(());
+    }
+    let format = std::fs::read(out.join(RECORD_FILE))
+        .ok()
+        .and_then(|bytes| serde_json::from_slice::<serde_json::Value>(&bytes).ok())
+        .and_then(|v| v.get("format").and_then(|f| f.as_str()).map(str::to_string));
+    if format.as_deref() != Some(EVAL_FORMAT) {
+        bail!(
+            "--out {}: the directory is not empty and has no {RECORD_FILE} of format \
+             '{EVAL_FORMAT}': `phi eval` did not write it; refusing to write into it",
+            out.display()
+        );
+    }
+    Ok(())
+}
+
+/// Runs `phi eval`: evaluates every model on every trajectory (reusing cached results), then
+/// writes the record, the tables, the plots and the GIF, and prints the table.
+///
+/// # Errors
+/// As [`plan`]; a model that does not load; a cache entry of another model or options; I/O.
+pub fn run(args: EvalArgs) -> Result<()> {
+    let plan = plan(&args)?;
+    let kind = args.backend.unwrap_or(BackendKind::available()[0]);
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let mut record = EvalRecord {
+        format: EVAL_FORMAT.to_string(),
+        made_by: format!("phi eval {}", env!("CARGO_PKG_VERSION")),
+        dataset: args.data.display().to_string(),
+        split: args.split.clone(),
+        trajectories: plan.indices.clone(),
+        options: plan.options,
+        complete: false,
+        gif: None,
+        models: plan
+            .models
+            .iter()
+            .map(|m| ModelRecord {
+                label: m.label.clone(),
+                dir: m.dir.display().to_string(),
+                digest: m.digest.clone(),
+                summary: None,
+                mse_band: None,
+                emd_band: None,
+            })
+            .collect(),
+    };
+    write_json(&args.out.join(RECORD_FILE), &record)?;
+    let evaluations = crate::with_backend!(kind, B => evaluate_all::<B>(&plan, &args))?;
+    for (model, evals) in record.models.iter_mut().zip(&evaluations) {
+        model.summary = Some(ModelSummary::of(evals));
+        model.mse_band = Some(Band::of(evals, |e| &e.curves.mse));
+        model.emd_band = Some(Band::of(evals, |e| &e.curves.emd));
+    }
+    if args.gif_every > 0 && plan.dataset.metadata().dim == 2 {
+        record.gif = Some(crate::with_backend!(kind, B => write_gif::<B>(&plan, &args))?);
+    }
+    let mut figures = Vec::new();
+    let any_band = record
+        .models
+        .iter()
+        .filter_map(|m| m.mse_band.as_ref())
+        .any(|b| b.mean.iter().any(|v| v.is_finite() && *v > 0.0));
+    if any_band {
+        plots::error_over_time(&record, &args.out.join(ERROR_PLOT))?;
+        figures.push(ERROR_PLOT);
+    }
+    plots::metric_bars(&record, &args.out.join(METRICS_PLOT))?;
+    figures.push(METRICS_PLOT);
+    if plots::screening(&plan.models, &args.out.join(SCREENING_PLOT))? {
+        figures.push(SCREENING_PLOT);
+    }
+    record.complete = true;
+    let table = markdown_table(&record);
+    write_text(&args.out.join(TABLE_MD), &table)?;
+    write_text(&args.out.join(TABLE_CSV), &csv_table(&record))?;
+    write_json(&args.out.join(RECORD_FILE), &record)?;
+    print!("{table}");
+    let gif = match &record.gif {
+        Some(gif) => format!(
+            ", {GIF_FILE} (trajectory {}: {})",
+            gif.index,
+            gif.panels.join(" | ")
+        ),
+        None => String::new(),
+    };
+    println!(
+        "wrote {}: {RECORD_FILE}, {TABLE_MD}, {TABLE_CSV}, {}{gif}, {CACHE_DIR}/",
+        args.out.display(),
+        figures.join(", ")
+    );
+    std::io::stdout().flush().ok();
+    Ok(())
+}
+
+/// Evaluates every (model, trajectory) pair not in the cache, in parallel, writing each result
+/// to the cache as it is done; returns each model's evaluations in index order.
+fn evaluate_all<B: GnsKernels>(
+    plan: &Plan,
+    args: &EvalArgs,
+) -> Result<Vec<Vec<TrajectoryEvaluation>>> {
+    let mut results: Vec<Vec<Option<TrajectoryEvaluation>>> =
+        vec![vec![None; plan.indices.len()]; plan.models.len()];
+    let mut todo = Vec::new();
+    for (m, model) in plan.models.iter().enumerate() {
+        let dir = args.out.join(CACHE_DIR).join(&model.label);
+        for (k, &index) in plan.indices.iter().enumerate() {
+            let path = dir.join(cache_file_name(&args.split, index));
+            match read_cache(&path, model, &args.split, &plan.options)? {
+                Some(entry) => results[m][k] = Some(entry.evaluation),
+                None => todo.push((m, k, index, path)),
+            }
+        }
+    }
+    let cached = plan.models.len() * plan.indices.len() - todo.len();
+    if cached > 0 {
+        tracing::info!(cached, "reusing cached trajectory evaluations");
+    }
+    let bar = crate::progress::step_bar(
+        todo.len(),
+        std::io::IsTerminal::is_terminal(&std::io::stderr()),
+    );
+    bar.set_message("trajectories");
+    let done = Mutex::new(Vec::with_capacity(todo.len()));
+    todo.par_iter()
+        .map(|(m, k, index, path)| -> Result<()> {
+            let model = &plan.models[*m];
+            let device = B::default_device();
+            let gns = load_model::<B>(&model.dir, &device)?;
+            let (trajectory, _) = plan.dataset.read_with_stats(&args.split, *index)?;
+            let evaluation = evaluate_trajectory(&gns, &trajectory, &plan.options, &device)
+                .with_context(|| {
+                    format!(
+                        "evaluating {} on trajectory {index} of '{}'",
+                        model.label, args.split
+                    )
+                })?;
+            let entry = CacheEntry {
+                format: CACHE_FORMAT.to_string(),
+                model: model.dir.display().to_string(),
+                digest: model.digest.clone(),
+                split: args.split.clone(),
+                options: plan.options,
+                evaluation,
+            };
+            if let Some(parent) = path.parent() {
+                std::fs::create_dir_all(parent)
+                    .with_context(|| format!("creating {}", parent.display()))?;
+            }
+            write_json(path, &entry)?;
+            bar.inc(1);
+            done.lock()
+                .expect("no thread panics while holding the lock")
+                .push((*m, *k, entry.evaluation));
+            Ok(())
+        })
+        .collect::<Result<Vec<()>>>()?;
+    bar.finish_and_clear();
+    for (m, k, evaluation) in done.into_inner().expect("no thread panicked") {
+        results[m][k] = Some(evaluation);
+    }
+    Ok(results
+        .into_iter()
+        .map(|evals| evals.into_iter().flatten().collect())
+        .collect())
+}
+
+/// Rolls every model out on trajectory `--gif-index` and writes `rollouts.gif`: the truth,
+/// then each model, side by side, every `--gif-every` frames from the start frame `C`. A model
+/// whose rollout blew up keeps its last finite frame.
+fn write_gif<B: GnsKernels>(plan: &Plan, args: &EvalArgs) -> Result<GifRecord> {
+    let (trajectory, _) = plan.dataset.read_with_stats(&args.split, args.gif_index)?;
+    let device = B::default_device();
+    let rollouts: Vec<(usize, Vec<Vec<f32>>)> =
+        plan.models
+            .par_iter()
+            .map(|model| -> Result<(usize, Vec<Vec<f32>>)> {
+                let gns = load_model::<B>(&model.dir, &device)?;
+                let c = model.spec.config.input_velocities;
+                let mut frames = vec![trajectory.frame(c).to_vec()];
+                let range = RolloutRange::full(c, trajectory.frames);
+                let ran = rollout(&gns, &trajectory, range, &device, |_, positions| {
+                    frames.push(positions.to_vec());
+                    Ok(())
+                });
+                match ran {
+                    Ok(()) | Err(ModelError::NonFinitePrediction { .. }) => Ok((c, frames)),
+                    Err(e) => Err(e)
+                        .with_context(|| format!("rolling {} out for {GIF_FILE}", model.label)),
+                }
+            })
+            .collect::<Result<_>>()?;
+    // From the earliest start; a model that reads more frames shows the truth until its own.
+    let start = rollouts.iter().map(|(c, _)| *c).min().unwrap_or(0);
+    let renderer = DatasetRenderer::new(plan.dataset.metadata(), args.pixels_per_cell)?;
+    let kinds = DatasetRenderer::kinds(&trajectory.particle_type);
+    let background = FrameStyle::default().background;
+    let mut writer: Option<GifWriter> = None;
+    let mut shown = Vec::new();
+    for frame in (start..trajectory.frames).step_by(args.gif_every) {
+        let truth = trajectory.frame(frame);
+        let mut pictures = vec![renderer.render(truth, &kinds)?];
+        for (c, frames) in &rollouts {
+            let shown = match frame.checked_sub(*c) {
+                Some(k) => &frames[k.min(frames.len() - 1)][..],
+                None => truth,
+            };
+            pictures.push(renderer.render(shown, &kinds)?);
+        }
+        let refs: Vec<&RgbImage> = pictures.iter().collect();
+        let image = side_by_side(&refs, GIF_GAP, background)?;
+        if writer.is_none() {
+            writer = Some(GifWriter::create(
+                args.out.join(GIF_FILE),
+                image.width,
+                image.height,
+                5,
+            )?);
+        }
+        if let Some(writer) = writer.as_mut() {
+            writer.add_frame(&image)?;
+        }
+        shown.push(frame);
+    }
+    if let Some(writer) = writer {
+        writer.finish()?;
+    }
+    let mut panels = vec!["ground truth".to_string()];
+    panels.extend(plan.models.iter().map(|m| m.label.clone()));
+    Ok(GifRecord {
+        index: args.gif_index,
+        panels,
+        frames: shown,
+    })
+}
+
+/// `<split>_<index>.json`.
+pub fn cache_file_name(split: &str, index: usize) -> String {
+    format!("{split}_{index}.json")
+}
+
+/// A cache entry that fits `model`, `split` and `options`, `None` when there is none.
+///
+/// # Errors
+/// An entry that does not read, or that belongs to another model, split, options or trajectory:
+/// the message names the entry and both sides.
+fn read_cache(
+    path: &Path,
+    model: &ModelEntry,
+    split: &str,
+    options: &EvalOptions,
+) -> Result<Option<CacheEntry>> {
+    let bytes = match std::fs::read(path) {
+        Ok(bytes) => bytes,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+    };
+    let entry: CacheEntry = serde_json::from_slice(&bytes).with_context(|| {
+        format!(
+            "{}: not a cached evaluation of `phi eval` (delete it to recompute it)",
+            path.display()
+        )
+    })?;
+    if entry.format != CACHE_FORMAT {
+        bail!(
+            "{}: format '{}', expected '{CACHE_FORMAT}'",
+            path.display(),
+            entry.format
+        );
+    }
+    if entry.digest != model.digest {
+        bail!(
+            "{}: computed for the model {} (weights digest {}), but '{}' is now {} (digest {}): \
+             use another --out, another name (--model NAME=DIR), or delete the entry",
+            path.display(),
+            entry.model,
+            entry.digest,
+            model.label,
+            model.dir.display(),
+            model.digest
+        );
+    }
+    if entry.split != split {
+        bail!(
+            "{}: computed on split '{}', not '{split}'",
+            path.display(),
+            entry.split
+        );
+    }
+    if entry.options != *options {
+        bail!(
+            "{}: computed with other options ({:?}) than this run's ({:?}): use another --out \
+             or the same options",
+            path.display(),
+            entry.options,
+            options
+        );
+    }
+    Ok(Some(entry))
+}
+
+/// Writes `value` as pretty JSON, atomically.
+fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
+    let mut text = serde_json::to_vec_pretty(value)?;
+    text.push(b'\n');
+    write_bytes(path, &text)
+}
+
+/// Writes `text`, atomically.
+fn write_text(path: &Path, text: &str) -> Result<()> {
+    write_bytes(path, text.as_bytes())
+}
+
+fn write_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_atomic(path, |w| {
+        w.write_all(bytes)
+            .map_err(|e| OutputError::io(path, "cannot write", e))
+    })?;
+    Ok(())
+}
+
+/// The columns of the tables: the markdown header (with table B.1's units), the scale of the
+/// markdown values, the CSV header, and the value.
+type Column = (
+    &'static str,
+    f64,
+    &'static str,
+    fn(&ModelSummary) -> Option<f64>,
+);
+
+const COLUMNS: [Column; 7] = [
+    ("EMD (10⁻²)", 1e-2, "emd", |s| s.emd),
+    ("MSE-acc 1 (10⁻¹)", 1e-1, "mse_acc1", |s| {
+        Some(s.mse_acc1)
+    }),
+    ("MSE 20 (10⁻⁵)", 1e-5, "mse20", |s| s.mse20),
+    ("MSE 400 (10⁻²)", 1e-2, "mse400", |s| s.mse400),
+    ("Sinkhorn (10⁻³)", 1e-3, "sinkhorn", |s| s.sinkhorn),
+    ("KE error (%)", 1e-2, "kinetic_energy_error", |s| {
+        s.kinetic_energy_error
+    }),
+    ("density ratio", 1.0, "density_ratio", |s| s.density_ratio),
+];
+
+/// The markdown table: one row per model, the thesis's four metrics in table B.1's units,
+/// then the extra ones; a rollout that blew up makes its metrics `inf`.
+pub fn markdown_table(record: &EvalRecord) -> String {
+    let mut text = String::from("| model |");
+    for (header, ..) in COLUMNS {
+        text.push_str(&format!(" {header} |"));
+    }
+    text.push_str(" blown up |\n|---|");
+    text.push_str(&"---:|".repeat(COLUMNS.len() + 1));
+    text.push('\n');
+    for model in &record.models {
+        let Some(summary) = &model.summary else {
+            continue;
+        };
+        text.push_str(&format!("| {} |", model.label));
+        for (_, scale, _, value) in COLUMNS {
+            match value(summary) {
+                Some(v) => text.push_str(&format!(" {:.4} |", v / scale)),
+                None => text.push_str(" inf |"),
+            }
+        }
+        text.push_str(&format!(
+            " {} of {} |\n",
+            summary.blown_up, summary.trajectories
+        ));
+    }
+    text
+}
+
+/// The CSV table: raw values (stored units², normalised units², fractions), `inf` for a blown-up
+/// rollout.
+pub fn csv_table(record: &EvalRecord) -> String {
+    let mut text = String::from("model");
+    for (_, _, name, _) in COLUMNS {
+        text.push(',');
+        text.push_str(name);
+    }
+    text.push_str(",blown_up,trajectories\n");
+    for model in &record.models {
+        let Some(summary) = &model.summary else {
+            continue;
+        };
+        text.push_str(&csv_field(&model.label));
+        for (_, _, _, value) in COLUMNS {
+            match value(summary) {
+                Some(v) => text.push_str(&format!(",{v:e}")),
+                None => text.push_str(",inf"),
+            }
+        }
+        text.push_str(&format!(",{},{}\n", summary.blown_up, summary.trajectories));
+    }
+    text
+}
+
+/// A CSV field, quoted where it holds a comma, a quote or a line break.
+fn csv_field(value: &str) -> String {
+    if value.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", value.replace('"', "\"\""))
+    } else {
+        value.to_string()
+    }
+}

@@ -1,0 +1,160 @@
+//! The figures of `phi eval`: error over time (thesis fig. 5.7), the metric bars (fig. 5.6) and
+//! the screening curves of the training logs (fig. 5.5), drawn with [`phi_plot`].
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use phi_plot::{BarChart, BarSeries, Figure, Legend, LinePlot, Series};
+
+use super::{EvalRecord, ModelEntry, ModelRecord};
+use phi_gns::eval::{Band, ModelSummary};
+
+/// The per-frame error of the models: MSE and EMD, the mean over the trajectories with the
+/// min–max range shaded (fig. 5.7), logarithmic axes.
+pub fn error_over_time(record: &EvalRecord, path: &Path) -> Result<()> {
+    let panel = |title: &str, y_label: &str, band: fn(&ModelRecord) -> Option<&Band>| {
+        let mut plot = LinePlot::new(title, "frame", y_label)
+            .with_log_y(true)
+            .with_legend(Legend::LowerRight);
+        for model in &record.models {
+            let Some(band) = band(model).filter(|b| drawable(&b.mean)) else {
+                continue;
+            };
+            let x: Vec<f64> = band.frame.iter().map(|&f| f as f64).collect();
+            plot = plot.with_series(
+                Series::new(&model.label, x, band.mean.clone())
+                    .with_band(band.min.clone(), band.max.clone()),
+            );
+        }
+        plot
+    };
+    let figure = Figure::new(
+        format!(
+            "Error over time on '{}' (mean, min–max range)",
+            record.split
+        ),
+        2,
+    )
+    .with_panel(panel(
+        "MSE of the rollout",
+        "position MSE (stored units²)",
+        |m| m.mse_band.as_ref(),
+    ))
+    .with_panel(panel("EMD", "EMD (ground cost)", |m| m.emd_band.as_ref()));
+    figure
+        .write_png(path)
+        .with_context(|| format!("drawing {}", path.display()))
+}
+
+/// Whether a log axis can show any of `values`.
+fn drawable(values: &[f64]) -> bool {
+    values.iter().any(|v| v.is_finite() && *v > 0.0)
+}
+
+/// One bar chart per metric of table B.1, one bar per model (fig. 5.6); a model whose
+/// rollouts blew up has no bar for the rollout metrics.
+pub fn metric_bars(record: &EvalRecord, path: &Path) -> Result<()> {
+    let metrics: [(&str, f64, fn(&ModelSummary) -> Option<f64>); 4] = [
+        ("EMD (10⁻²)", 1e-2, |s| s.emd),
+        ("MSE-acc 1 (10⁻¹)", 1e-1, |s| Some(s.mse_acc1)),
+        ("MSE 20 (10⁻⁵)", 1e-5, |s| s.mse20),
+        ("MSE 400 (10⁻²)", 1e-2, |s| s.mse400),
+    ];
+    let mut figure = Figure::new(format!("Metrics on '{}'", record.split), 4);
+    for (name, scale, value) in metrics {
+        let mut chart = BarChart::new(name, name, [record.split.as_str()]).with_size(420, 500);
+        for model in &record.models {
+            let v = model
+                .summary
+                .as_ref()
+                .and_then(value)
+                .map_or(f64::NAN, |v| v / scale);
+            chart = chart.with_series(BarSeries::new(&model.label, vec![v]));
+        }
+        figure = figure.with_panel(chart);
+    }
+    figure
+        .write_png(path)
+        .with_context(|| format!("drawing {}", path.display()))
+}
+
+/// The screening rows of a `phi train` log: `(step, MSE-acc 1, rollout MSE)` of each row with
+/// a screening.
+///
+/// # Errors
+/// A log that does not read or whose header lacks the columns.
+pub fn read_screening(path: &Path) -> Result<Vec<(f64, f64, f64)>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    let column = |name: &str| {
+        header
+            .iter()
+            .position(|h| *h == name)
+            .with_context(|| format!("{}: no column '{name}' in the header", path.display()))
+    };
+    let (step, acc, rollout) = (
+        column("step")?,
+        column("valid_mse_acc1")?,
+        column("valid_rollout_mse")?,
+    );
+    let mut rows = Vec::new();
+    for (n, line) in lines.enumerate() {
+        let fields: Vec<&str> = line.split(',').collect();
+        let field = |k: usize| fields.get(k).copied().unwrap_or("");
+        if field(acc).is_empty() {
+            continue;
+        }
+        let number = |k: usize| -> Result<f64> {
+            field(k).parse::<f64>().with_context(|| {
+                format!(
+                    "{}: line {}: '{}' is not a number",
+                    path.display(),
+                    n + 2,
+                    field(k)
+                )
+            })
+        };
+        rows.push((number(step)?, number(acc)?, number(rollout)?));
+    }
+    Ok(rows)
+}
+
+/// The validation curves of the models that come from `phi train` directories (fig. 5.5):
+/// MSE-acc 1 and the rollout MSE over training steps. Returns whether any model had a log.
+pub fn screening(models: &[ModelEntry], path: &Path) -> Result<bool> {
+    let mut acc = LinePlot::new(
+        "MSE-acc 1",
+        "training step",
+        "MSE-acc 1 (normalised units²)",
+    )
+    .with_log_y(true);
+    let mut rollout = LinePlot::new(
+        "Rollout MSE",
+        "training step",
+        "position MSE (stored units²)",
+    )
+    .with_log_y(true);
+    let mut any = false;
+    for model in models {
+        let Some(run) = &model.run else { continue };
+        let rows = read_screening(&run.join("train.csv"))?;
+        let (accs, rollouts): (Vec<f64>, Vec<f64>) = rows.iter().map(|r| (r.1, r.2)).unzip();
+        if !drawable(&accs) || !drawable(&rollouts) {
+            continue;
+        }
+        let steps: Vec<f64> = rows.iter().map(|r| r.0).collect();
+        acc = acc.with_series(Series::new(&model.label, steps.clone(), accs));
+        rollout = rollout.with_series(Series::new(&model.label, steps, rollouts));
+        any = true;
+    }
+    if any {
+        Figure::new("Screening on the validation split during training", 2)
+            .with_panel(acc)
+            .with_panel(rollout)
+            .write_png(path)
+            .with_context(|| format!("drawing {}", path.display()))?;
+    }
+    Ok(any)
+}

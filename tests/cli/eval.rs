@@ -1,0 +1,214 @@
+//! `phi eval` end to end on a tiny dataset and untrained models: every file, the table against
+//! the per-frame curves and the per-trajectory results, resumption from the cache, and the
+//! refusals (another model's cache, a model that does not fit, a missing split, a foreign
+//! output directory).
+
+use std::path::Path;
+use std::process::Output;
+
+use phi::phi_gns::data::Variant;
+
+use super::rollout::{failed, init, json, tiny_dataset_with};
+use super::{ok, phi, scratch};
+
+fn eval(models: &[String], data: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut command = phi();
+    command.arg("eval");
+    for model in models {
+        command.arg("--model").arg(model);
+    }
+    command
+        .arg("--data")
+        .arg(data)
+        .arg("--out")
+        .arg(out)
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
+fn f64_of(value: &serde_json::Value) -> f64 {
+    value
+        .as_f64()
+        .unwrap_or_else(|| panic!("not a number: {value}"))
+}
+
+#[test]
+fn eval_writes_tables_plots_gif_and_resumes_from_its_cache() {
+    let dir = scratch("eval");
+    let data = dir.join("data");
+    tiny_dataset_with(&data, 2, [0.1, 0.9], Variant::Obstacles, &[("test", 3)], 30);
+    let (a, b) = (dir.join("a"), dir.join("b"));
+    ok(init(&data, &a, &["--seed", "1"]));
+    ok(init(&data, &b, &["--seed", "2"]));
+    let out = dir.join("out");
+    let models = [format!("first={}", a.display()), b.display().to_string()];
+    let options = ["--short-rollout", "10", "--sinkhorn-every", "8"];
+    let stdout = ok(eval(&models, &data, &out, &options));
+    assert!(
+        stdout.contains("| first |") && stdout.contains("| b |"),
+        "{stdout}"
+    );
+    for file in [
+        "eval.json",
+        "table.md",
+        "table.csv",
+        "error_over_time.png",
+        "metrics.png",
+        "rollouts.gif",
+    ] {
+        assert!(out.join(file).is_file(), "{file} is missing: {stdout}");
+    }
+
+    let record = json(&out.join("eval.json"));
+    assert_eq!(record["format"], "phi-eval");
+    assert_eq!(record["complete"], true);
+    assert_eq!(record["trajectories"], serde_json::json!([0, 1, 2]));
+    let csv = std::fs::read_to_string(out.join("table.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
+    let header = &rows[0];
+    let column = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    for (m, label) in ["first", "b"].iter().enumerate() {
+        let model = &record["models"][m];
+        assert_eq!(model["label"], *label);
+        let summary = &model["summary"];
+        // The per-trajectory results are in the cache; the summary is their mean, and each
+        // trajectory's MSE 400 is the mean of its per-frame curve.
+        let mut mse400 = Vec::new();
+        let mut acc = Vec::new();
+        for index in 0..3 {
+            let entry = json(&out.join(format!("cache/{label}/test_{index}.json")));
+            let evaluation = &entry["evaluation"];
+            let curve: Vec<f64> = evaluation["curves"]["mse"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(f64_of)
+                .collect();
+            assert_eq!(curve.len(), 30 - 1 - 5);
+            let mean = curve.iter().sum::<f64>() / curve.len() as f64;
+            approx::assert_relative_eq!(f64_of(&evaluation["mse400"]), mean, max_relative = 1e-12);
+            mse400.push(mean);
+            acc.push(f64_of(&evaluation["mse_acc1"]));
+        }
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        approx::assert_relative_eq!(
+            f64_of(&summary["mse400"]),
+            mean(&mse400),
+            max_relative = 1e-12
+        );
+        approx::assert_relative_eq!(
+            f64_of(&summary["mse_acc1"]),
+            mean(&acc),
+            max_relative = 1e-12
+        );
+        // The band's mean over frames is the table's MSE 400 (the trajectories are equally long).
+        let band: Vec<f64> = model["mse_band"]["mean"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(f64_of)
+            .collect();
+        approx::assert_relative_eq!(
+            mean(&band),
+            f64_of(&summary["mse400"]),
+            max_relative = 1e-12
+        );
+        // The CSV row holds the same numbers.
+        let row = &rows[m + 1];
+        assert_eq!(row[0], *label);
+        let value: f64 = row[column("mse400")].parse().unwrap();
+        approx::assert_relative_eq!(value, f64_of(&summary["mse400"]), max_relative = 1e-12);
+        let emd: f64 = row[column("emd")].parse().unwrap();
+        assert!(
+            emd > 0.0 && emd <= 2.0 * value * (1.0 + 1e-9),
+            "EMD {emd}, MSE {value}"
+        );
+    }
+    let table = std::fs::read_to_string(out.join("table.md")).unwrap();
+    assert!(
+        table.contains("MSE 400 (10⁻²)") && table.contains("EMD (10⁻²)"),
+        "{table}"
+    );
+
+    // A second run reuses every cached result and writes the same table.
+    let cache = out.join("cache/b/test_1.json");
+    let before = std::fs::read(&cache).unwrap();
+    let again = ok(eval(&models, &data, &out, &options));
+    assert_eq!(
+        std::fs::read_to_string(out.join("table.md")).unwrap(),
+        table
+    );
+    assert!(again.contains("| first |"), "{again}");
+    assert_eq!(std::fs::read(&cache).unwrap(), before);
+
+    // Other weights under the same name: the cache is refused, naming the entry and both digests.
+    ok(init(&data, &b, &["--seed", "5"]));
+    let stderr = failed(eval(&models, &data, &out, &options));
+    assert!(
+        stderr.contains("test_0.json") && stderr.contains("digest") && stderr.contains("'b'"),
+        "{stderr}"
+    );
+    // ... and other options too.
+    let stderr = failed(eval(&models[..1], &data, &out, &["--short-rollout", "7"]));
+    assert!(stderr.contains("other options"), "{stderr}");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn eval_refuses_what_does_not_fit() {
+    let dir = scratch("eval-refusals");
+    let (plane, space) = (dir.join("2d"), dir.join("3d"));
+    tiny_dataset_with(
+        &plane,
+        2,
+        [0.1, 0.9],
+        Variant::Obstacles,
+        &[("test", 1)],
+        12,
+    );
+    tiny_dataset_with(
+        &space,
+        3,
+        [0.1, 0.9],
+        Variant::Obstacles,
+        &[("test", 1)],
+        12,
+    );
+    let (m2, m3) = (dir.join("m2"), dir.join("m3"));
+    ok(init(&plane, &m2, &[]));
+    ok(init(&space, &m3, &[]));
+    let out = dir.join("out");
+    let m3s = [m3.display().to_string()];
+    let stderr = failed(eval(&m3s, &plane, &out, &[]));
+    assert!(
+        stderr.contains("m3") && stderr.contains("metadata.json") && stderr.contains("key 'dim'"),
+        "{stderr}"
+    );
+    let m2s = [m2.display().to_string()];
+    let stderr = failed(eval(&m2s, &plane, &out, &["--split", "valid"]));
+    assert!(stderr.contains("valid"), "{stderr}");
+    let twice = [m2.display().to_string(), m2.display().to_string()];
+    let stderr = failed(eval(&twice, &plane, &out, &[]));
+    assert!(stderr.contains("NAME=DIR"), "{stderr}");
+    let stderr = failed(eval(&m2s, &plane, &out, &["--trajectories", "2"]));
+    assert!(stderr.contains("--trajectories 2"), "{stderr}");
+    let nothing = [dir.join("nothing").display().to_string()];
+    let stderr = failed(eval(&nothing, &plane, &out, &[]));
+    assert!(stderr.contains("model.json"), "{stderr}");
+    assert!(
+        !out.exists(),
+        "a refused evaluation wrote {}",
+        out.display()
+    );
+    // A directory it did not write is refused and left alone.
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    let stderr = failed(eval(&m2s, &plane, &out, &[]));
+    assert!(stderr.contains("did not write"), "{stderr}");
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
