@@ -1,5 +1,6 @@
 //! Plots for phi as PNG images: line plots with min–max bands ([`LinePlot`], [`Series`]),
-//! grouped bar charts ([`BarChart`]) and multi-panel figures of both ([`Figure`]).
+//! grouped bar charts ([`BarChart`]) and multi-panel figures of both ([`Figure`]); and captions
+//! on other pictures ([`draw_text`]).
 //!
 //! Every chart has a title, labelled axes with ticks and a grid, and a legend; series take the
 //! colours of a fixed qualitative palette ([`PALETTE`]) in order, and a series' band is a
@@ -37,6 +38,7 @@ mod axis;
 mod bar;
 mod bitmap;
 mod canvas;
+mod caption;
 mod chart;
 mod error;
 mod figure;
@@ -48,6 +50,7 @@ mod text;
 
 pub use bar::{BarChart, BarSeries};
 pub use bitmap::{Bitmap, MAX_SIDE, MIN_SIZE};
+pub use caption::{draw_text, text_size};
 pub use chart::Legend;
 pub use error::PlotError;
 pub use figure::{Figure, Panel};

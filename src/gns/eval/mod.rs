@@ -10,7 +10,7 @@
 //!   the min–max range), `metrics.png` (fig. 5.6) and, for models that come from a `phi train`
 //!   directory, `screening.png` (fig. 5.5: the validation curves of its `train.csv`);
 //! - `rollouts.gif` (fig. 5.8): one trajectory, the ground truth first and then every model, side
-//!   by side (2D datasets);
+//!   by side, each panel captioned with its model and the truth's with the frame (2D datasets);
 //! - `cache/<model>/<split>_<index>.json`: each trajectory's evaluation, written as soon as it
 //!   is done and reused by a later run with the same model weights, dataset trajectory and
 //!   options, so that a killed evaluation resumes where it stopped. A cache entry of another
@@ -576,7 +576,8 @@ fn evaluate_all<B: GnsKernels>(
 
 /// Rolls every model out on trajectory `--gif-index` and writes `rollouts.gif`: the truth,
 /// then each model, side by side, every `--gif-every` frames from the start frame `C`. A model
-/// whose rollout blew up keeps its last finite frame.
+/// whose rollout blew up keeps its last finite frame, captioned "(blown up)"; one that reads
+/// more history frames than another shows the truth until its own start, captioned "(history)".
 fn write_gif<B: GnsKernels>(plan: &Plan, args: &EvalArgs) -> Result<GifRecord> {
     let (trajectory, _) = plan.dataset.read_with_stats(&args.split, args.gif_index)?;
     let device = B::default_device();
@@ -608,13 +609,25 @@ fn write_gif<B: GnsKernels>(plan: &Plan, args: &EvalArgs) -> Result<GifRecord> {
     let mut shown = Vec::new();
     for frame in (start..trajectory.frames).step_by(args.gif_every) {
         let truth = trajectory.frame(frame);
-        let mut pictures = vec![renderer.render(truth, &kinds)?];
-        for (c, frames) in &rollouts {
-            let shown = match frame.checked_sub(*c) {
-                Some(k) => &frames[k.min(frames.len() - 1)][..],
-                None => truth,
+        let mut pictures = vec![plots::captioned(
+            &renderer.render(truth, &kinds)?,
+            &format!("ground truth, frame {frame}"),
+            background,
+        )?];
+        for ((c, frames), model) in rollouts.iter().zip(&plan.models) {
+            let (shown, caption) = match frame.checked_sub(*c) {
+                Some(k) if k < frames.len() => (&frames[k][..], model.label.clone()),
+                Some(_) => (
+                    &frames[frames.len() - 1][..],
+                    format!("{} (blown up)", model.label),
+                ),
+                None => (truth, format!("{} (history)", model.label)),
             };
-            pictures.push(renderer.render(shown, &kinds)?);
+            pictures.push(plots::captioned(
+                &renderer.render(shown, &kinds)?,
+                &caption,
+                background,
+            )?);
         }
         let refs: Vec<&RgbImage> = pictures.iter().collect();
         let image = side_by_side(&refs, GIF_GAP, background)?;

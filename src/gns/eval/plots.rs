@@ -7,6 +7,7 @@ use anyhow::{Context, Result};
 use phi_plot::{BarChart, BarSeries, Figure, Legend, LinePlot, Series};
 
 use super::{EvalRecord, ModelEntry, ModelRecord};
+use crate::output::RgbImage;
 use phi_gns::eval::{Band, ModelSummary};
 
 /// The per-frame error of the models: MSE and EMD, the mean over the trajectories with the
@@ -157,4 +158,28 @@ pub fn screening(models: &[ModelEntry], path: &Path) -> Result<bool> {
             .with_context(|| format!("drawing {}", path.display()))?;
     }
     Ok(any)
+}
+
+/// Height in pixels of the caption strip above each panel of `rollouts.gif`.
+const CAPTION_SIZE: f64 = 14.0;
+
+/// `picture` with a strip above it that holds `caption`, centred (clipped at the sides when the
+/// picture is narrower than the text), in dark grey on `background`.
+pub fn captioned(picture: &RgbImage, caption: &str, background: [u8; 3]) -> Result<RgbImage> {
+    let (text_width, text_height) = phi_plot::text_size(caption, CAPTION_SIZE)?;
+    let strip = text_height + 6;
+    let mut image = RgbImage::new(picture.width, picture.height + strip, background);
+    let row = 3 * picture.width as usize;
+    image.pixels[strip as usize * row..].copy_from_slice(&picture.pixels);
+    let x = (i64::from(picture.width) - i64::from(text_width)) / 2;
+    phi_plot::draw_text(
+        &mut image.pixels,
+        (image.width, image.height),
+        caption,
+        (x.max(2) as i32, 3),
+        CAPTION_SIZE,
+        [40, 40, 40],
+    )
+    .with_context(|| format!("drawing the caption '{caption}'"))?;
+    Ok(image)
 }
