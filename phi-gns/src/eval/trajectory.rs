@@ -1,9 +1,7 @@
 //! One test trajectory evaluated: the thesis's four metrics and the extra ones, with their
 //! curves over the frames of the full rollout.
 
-use phi_core::point_sets::{
-    GroundCost, SinkhornOptions, earth_movers_distance, sinkhorn_divergence_host,
-};
+use phi_core::point_sets::{EmdSolver, GroundCost, SinkhornOptions, sinkhorn_divergence_host};
 use serde::{Deserialize, Serialize};
 
 use super::EvalError;
@@ -320,6 +318,8 @@ fn full_rollout<B: GnsKernels>(
     let kinematic: Vec<bool> = liquid.iter().map(|l| !l).collect();
     let sinkhorn = SinkhornOptions::new(options.sinkhorn_epsilon);
     let mut curves = Curves::default();
+    // Consecutive frames differ little: each EMD starts from the previous frame's solution.
+    let mut emd = EmdSolver::new();
     let mut previous = trajectory.frame(c).to_vec();
     let mut metric_error: Option<EvalError> = None;
     let ran = rollout(model, trajectory, range, device, |step, positions| {
@@ -332,7 +332,7 @@ fn full_rollout<B: GnsKernels>(
             curves
                 .mse
                 .push(position_mse(positions, truth, &kinematic, dim));
-            curves.emd.push(earth_movers_distance(
+            curves.emd.push(emd.solve(
                 &predicted_liquid,
                 &true_liquid,
                 dim,
