@@ -1,6 +1,7 @@
 //! `phi optimize`: the thesis' optimisation experiment (section 4.3) — initial particle positions
 //! optimised by gradient descent through the differentiable FLIP simulation so that the simulated
-//! liquid matches a target.
+//! liquid matches a target; or, with `--simulator gns --model DIR`, through a trained GNS's
+//! rollout over the same scene towards the same (FLIP) target ([`crate::gns::inverse`]).
 //!
 //! Output directory:
 //! - `loss.csv`: `iteration,loss,gradient_norm,rms_distance,chamfer` per iteration (iteration
@@ -23,10 +24,12 @@ use anyhow::{Context, Result, bail};
 use phi_core::AutodiffBackend;
 use phi_core::fields::LatticeKernels;
 use phi_core::point_sets::set_distances;
-use phi_flip::optimize::{IterationRecord, LossSpec};
+use phi_flip::optimize::{Forward, IterationRecord, LossSpec};
 use phi_flip::{OptimizeConfig, OptimizeProblem};
+use phi_gns::model::GnsKernels;
 use serde::Serialize;
 
+use crate::gns::inverse::GnsForward;
 use crate::output::{
     FrameStyle, KIND_LIQUID, OutputError, RgbImage, render_frame, write_atomic, write_png,
 };
@@ -54,6 +57,23 @@ pub struct OptimizeArgs {
     /// Pixels per grid cell in the frames.
     #[arg(long, default_value_t = 8)]
     pub pixels_per_cell: u32,
+    /// The simulator between the initial positions and the loss: flip, or gns (a trained
+    /// model, `--model`). The target is FLIP's either way.
+    #[arg(long, value_enum, default_value_t = Simulator::Flip)]
+    pub simulator: Simulator,
+    /// The model directory of `--simulator gns` (a `phi train` directory's `best/`, say).
+    #[arg(long, required_if_eq("simulator", "gns"))]
+    pub model: Option<PathBuf>,
+}
+
+/// What simulates the optimised liquid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Simulator {
+    /// The differentiable FLIP simulation of the scene.
+    Flip,
+    /// A trained Graph Network-based Simulator rolled out over the scene.
+    Gns,
 }
 
 fn parse_loss(name: &str) -> Result<LossSpec, String> {
@@ -89,6 +109,15 @@ pub fn run(args: OptimizeArgs) -> Result<()> {
         loss: args.loss,
         frame_every: args.frame_every,
         pixels_per_cell: args.pixels_per_cell,
+        model: match args.simulator {
+            Simulator::Flip => {
+                if args.model.is_some() {
+                    bail!("--model is for --simulator gns");
+                }
+                None
+            }
+            Simulator::Gns => args.model.clone(),
+        },
     };
     println!(
         "{}: {}",
@@ -107,11 +136,12 @@ pub fn run(args: OptimizeArgs) -> Result<()> {
     );
     let summary = summary?;
     println!(
-        "{} iterations of {} particles on {} ({} loss, {:.2} s per iteration): loss {} -> {} \
+        "{} iterations of {} particles through {} on {} ({} loss, {:.2} s per iteration): loss {} -> {} \
          (within 1% of the lowest from iteration {}); Chamfer distance to the target {:.3} -> \
          {:.3}, earth mover's {:.3} -> {:.3} cells; outputs in {}",
         summary.iterations,
         summary.particles,
+        summary.simulator,
         summary.backend,
         summary.loss,
         summary.seconds_per_iteration,
@@ -145,6 +175,8 @@ pub struct OptimizeOptions {
     pub frame_every: usize,
     /// Pixels per grid cell in the frames.
     pub pixels_per_cell: u32,
+    /// A GNS model directory to simulate with instead of FLIP.
+    pub model: Option<PathBuf>,
 }
 
 /// What a run did.
@@ -152,6 +184,8 @@ pub struct OptimizeOptions {
 pub struct OptimizeSummary {
     /// The backend.
     pub backend: String,
+    /// The simulator: `flip`, or `gns <model directory>`.
+    pub simulator: String,
     /// The loss (`l2`, `sinkhorn`, `density`).
     pub loss: String,
     /// Particles optimised.
@@ -179,7 +213,7 @@ pub struct OptimizeSummary {
 ///
 /// # Errors
 /// Configuration and output errors; an early stop, after its outputs are written.
-pub fn optimize<B: AutodiffBackend + LatticeKernels>(
+pub fn optimize<B: AutodiffBackend + LatticeKernels + GnsKernels>(
     config: &OptimizeConfig,
     options: &OptimizeOptions,
 ) -> Result<OptimizeSummary> {
@@ -193,6 +227,14 @@ pub fn optimize<B: AutodiffBackend + LatticeKernels>(
     let origin = options.config.display().to_string();
     let device = B::default_device();
     let problem: OptimizeProblem<B> = config.build(&origin, &device)?;
+    let gns = match &options.model {
+        Some(dir) => Some(GnsForward::new(dir, &problem, &origin)?),
+        None => None,
+    };
+    let forward: &dyn Forward<B> = match &gns {
+        Some(gns) => gns,
+        None => &problem,
+    };
     let out = &options.out;
     let frames = out.join("frames");
     std::fs::create_dir_all(&frames).with_context(|| format!("creating {}", frames.display()))?;
@@ -229,7 +271,7 @@ pub fn optimize<B: AutodiffBackend + LatticeKernels>(
     let frame_every = options.frame_every.max(1);
     let started = Instant::now();
     let mut draw_error = None;
-    let outcome = problem.run(|record: &IterationRecord| {
+    let outcome = problem.run_through(forward, |record: &IterationRecord| {
         eprintln!(
             "iteration {:>3}: loss {:>12.4}  |∇| {:>10.4}  chamfer {:.3}",
             record.iteration, record.loss, record.gradient_norm, record.chamfer
@@ -282,6 +324,10 @@ pub fn optimize<B: AutodiffBackend + LatticeKernels>(
     let converged_at = convergence_iteration(&losses);
     let summary = OptimizeSummary {
         backend: B::name().to_string(),
+        simulator: match &gns {
+            Some(gns) => format!("gns {}", gns.name()),
+            None => "flip".into(),
+        },
         loss: problem.loss.name().into(),
         particles: problem.initial.len(),
         iterations: records.len(),

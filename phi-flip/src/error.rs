@@ -53,6 +53,16 @@ pub enum FlipError {
     /// A tensor operation failed.
     #[error(transparent)]
     Tensor(#[from] TensorError),
+    /// A simulator other than FLIP, driven through [`crate::optimize::Forward`] (a learned
+    /// one), failed.
+    #[error("{simulator}: {source}")]
+    Simulator {
+        /// The simulator, as named to the user.
+        simulator: String,
+        /// Its error.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
 }
 
 /// The result type of the simulator.

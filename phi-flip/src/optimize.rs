@@ -477,9 +477,32 @@ impl OptimizeOutcome {
     }
 }
 
+/// A differentiable simulator of the optimised liquid: initial positions `[N, d]` (domain
+/// units, carrying gradients) to positions after the run, `[N, d]`. FLIP is one
+/// ([`OptimizeProblem`] itself); a learned simulator driven over the same scene is another.
+pub trait Forward<B: Backend> {
+    /// The positions after the run from `initial`, differentiable with respect to `initial`.
+    ///
+    /// # Errors
+    /// Whatever the simulator reports.
+    fn run(&self, initial: &Tensor<B>) -> Result<Tensor<B>, FlipError>;
+}
+
+/// FLIP: the problem's simulation, `steps` steps, with the initial guess's velocities.
+impl<B: LatticeKernels> Forward<B> for OptimizeProblem<B> {
+    fn run(&self, initial: &Tensor<B>) -> Result<Tensor<B>, FlipError> {
+        let start = Particles {
+            positions: initial.clone(),
+            velocities: self.initial.velocities.clone(),
+            affine: self.initial.affine.clone(),
+        };
+        Ok(simulate(&self.simulation, &start, self.steps, None)?.positions)
+    }
+}
+
 impl<B: AutodiffBackend + LatticeKernels> OptimizeProblem<B> {
     /// The loss, its gradient with respect to the initial positions `positions` `[N, d]`, and
-    /// the simulated final positions.
+    /// the simulated final positions, through FLIP.
     ///
     /// # Errors
     /// Simulation and loss errors.
@@ -487,26 +510,43 @@ impl<B: AutodiffBackend + LatticeKernels> OptimizeProblem<B> {
         &self,
         positions: &Tensor<B>,
     ) -> Result<(f32, Tensor<B>, Tensor<B>), FlipError> {
-        let x0 = positions.detach().require_grad();
-        let start = Particles {
-            positions: x0.clone(),
-            velocities: self.initial.velocities.clone(),
-            affine: self.initial.affine.clone(),
-        };
-        let end = simulate(&self.simulation, &start, self.steps, None)?;
-        let loss = self
-            .loss
-            .evaluate(&end.positions, &self.target, self.simulation.domain())?;
-        let value = loss.to_scalar()?;
-        let gradient = loss.gradients(&[&x0])?.remove(0);
-        Ok((value, gradient, end.positions.detach()))
+        self.loss_and_gradient_through(self, positions)
     }
 
-    /// Gradient descent on the initial positions: `x ← clamp(x − lr ∇L)` into the domain. Calls
-    /// `on_record` after each iteration (for progress and output). Stops early, keeping the
-    /// last good state, when the loss or gradient is not finite, the loss exceeds
+    /// [`OptimizeProblem::loss_and_gradient`] through another simulator.
+    ///
+    /// # Errors
+    /// Simulation and loss errors.
+    pub fn loss_and_gradient_through(
+        &self,
+        forward: &dyn Forward<B>,
+        positions: &Tensor<B>,
+    ) -> Result<(f32, Tensor<B>, Tensor<B>), FlipError> {
+        let x0 = positions.detach().require_grad();
+        let end = forward.run(&x0)?;
+        let loss = self
+            .loss
+            .evaluate(&end, &self.target, self.simulation.domain())?;
+        let value = loss.to_scalar()?;
+        let gradient = loss.gradients(&[&x0])?.remove(0);
+        Ok((value, gradient, end.detach()))
+    }
+
+    /// Gradient descent on the initial positions through FLIP: `x ← clamp(x − lr ∇L)` into the
+    /// domain. Calls `on_record` after each iteration (for progress and output). Stops early,
+    /// keeping the last good state, when the loss or gradient is not finite, the loss exceeds
     /// `divergence_factor` times the first, or the simulation fails.
-    pub fn run(&self, mut on_record: impl FnMut(&IterationRecord)) -> OptimizeOutcome {
+    pub fn run(&self, on_record: impl FnMut(&IterationRecord)) -> OptimizeOutcome {
+        self.run_through(self, on_record)
+    }
+
+    /// [`OptimizeProblem::run`] with another simulator between the initial positions and the
+    /// loss; the target stays the problem's (FLIP's, when the target is simulated).
+    pub fn run_through(
+        &self,
+        forward: &dyn Forward<B>,
+        mut on_record: impl FnMut(&IterationRecord),
+    ) -> OptimizeOutcome {
         let domain = self.simulation.domain().clone();
         let d = domain.dim();
         let target_host = self.target.to_vec();
@@ -514,7 +554,7 @@ impl<B: AutodiffBackend + LatticeKernels> OptimizeProblem<B> {
         let mut records = Vec::new();
         let mut first_loss = None;
         for iteration in 0..=self.iterations {
-            let (loss, gradient, end) = match self.loss_and_gradient(&positions) {
+            let (loss, gradient, end) = match self.loss_and_gradient_through(forward, &positions) {
                 Ok(r) => r,
                 Err(source) => {
                     return OptimizeOutcome {

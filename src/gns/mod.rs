@@ -8,7 +8,9 @@
 //!   predictions, the truth, the per-frame position error and a GIF of both side by side;
 //! - [`train`]: `phi train`, a model trained on a dataset with a preset of `configs/gns/`;
 //! - [`eval`]: `phi eval`, models evaluated on a split with the thesis's metrics: tables,
-//!   plots and a GIF of their rollouts side by side.
+//!   plots and a GIF of their rollouts side by side;
+//! - [`inverse`]: `phi optimize --simulator gns`, the optimisation of initial positions through
+//!   a trained model's rollout instead of FLIP.
 //!
 //! The files are those of [`phi_gns::model`] and [`phi_gns::data`]; `docs/gns.md` describes
 //! them and the commands. Neither command overwrites files it did not write: each recognises
@@ -17,6 +19,7 @@
 
 pub mod eval;
 pub mod init;
+pub mod inverse;
 pub mod rollout;
 pub mod train;
 

@@ -1,6 +1,17 @@
 //! `phi optimize` end to end: a short optimisation writes its loss curve, plot, frames and
-//! summary with a decreasing loss; a bad configuration is an error naming file and key.
+//! summary with a decreasing loss; a bad configuration is an error naming file and key. Through
+//! a GNS: the gradient of the learned rollout against finite differences, a short run, and a
+//! model that does not fit the scene refused.
 
+use phi::gns::inverse::GnsForward;
+use phi::phi_core::Backend;
+use phi::phi_core::backend::burn::Burn;
+use phi::phi_core::tensor::Tensor;
+use phi::phi_flip::optimize::Forward;
+use phi::phi_flip::{OptimizeConfig, OptimizeProblem};
+use phi::phi_gns::data::Variant;
+
+use super::rollout::{failed, init, tiny_dataset_with};
 use super::{ok, phi, scratch};
 
 const CONFIG: &str = r#"
@@ -48,7 +59,7 @@ fn optimize_writes_loss_curve_plot_and_frames() {
         .output()
         .unwrap());
     assert!(
-        stdout.contains("5 iterations of 32 particles on burn"),
+        stdout.contains("5 iterations of 32 particles through flip on burn"),
         "{stdout}"
     );
     let csv = std::fs::read_to_string(out.join("loss.csv")).unwrap();
@@ -101,4 +112,133 @@ fn optimize_reports_configuration_errors_with_file_and_key() {
         stderr.contains("bad.toml") && stderr.contains("target.liquid[0]"),
         "{stderr}"
     );
+}
+
+/// A model with seeded random weights for the 12 × 12 scene of [`CONFIG`]: its dataset's bounds
+/// [0.1, 0.9] are the scene's grid in stored units (0.8 / 12 per cell).
+fn tiny_model(dir: &std::path::Path, bounds: [f64; 2]) -> std::path::PathBuf {
+    let data = dir.join("data");
+    tiny_dataset_with(&data, 2, bounds, Variant::Obstacles, &[("train", 1)], 10);
+    let model = dir.join("model");
+    ok(init(&data, &model, &[]));
+    model
+}
+
+#[test]
+fn gns_rollout_gradients_match_finite_differences() {
+    let dir = scratch("optimize-gns-gradient");
+    let model = tiny_model(&dir, [0.1, 0.9]);
+    let config = OptimizeConfig::from_toml(CONFIG, "tiny.toml").unwrap();
+    let device = <Burn as Backend>::default_device();
+    let problem: OptimizeProblem<Burn> = config.build("tiny.toml", &device).unwrap();
+    let forward = GnsForward::new(&model, &problem, "tiny.toml").unwrap();
+    let x0 = problem.initial.positions.detach();
+    let host = x0.to_vec();
+    let n = host.len() / 2;
+    // A fixed linear functional of the final positions: its gradient is the rollout's
+    // vector-Jacobian product with `w`.
+    let w: Vec<f32> = (0..2 * n)
+        .map(|i| ((i * 7919) % 13) as f32 / 13.0 - 0.5)
+        .collect();
+    let weights = Tensor::<Burn>::from_vec(w.clone(), &[n, 2], &device).unwrap();
+    let objective = |x: &[f32]| -> f64 {
+        let x = Tensor::<Burn>::from_vec(x.to_vec(), &[n, 2], &device).unwrap();
+        let end = forward.run(&x).unwrap().to_vec();
+        end.iter()
+            .zip(&w)
+            .map(|(e, w)| f64::from(*e) * f64::from(*w))
+            .sum()
+    };
+    let x = x0.require_grad();
+    let end = forward.run(&x).unwrap();
+    let value = (&end * &weights).sum();
+    let gradient = value.gradients(&[&x]).unwrap().remove(0).to_vec();
+    assert!(gradient.iter().all(|g| g.is_finite()));
+    assert!(
+        gradient.iter().any(|g| g.abs() > 1e-3),
+        "a rollout whose output does not depend on its input: {gradient:?}"
+    );
+    let eps = 2e-3f32;
+    for k in [0, 7, 2 * n / 2 + 1, 2 * n - 1] {
+        let (mut plus, mut minus) = (host.clone(), host.clone());
+        plus[k] += eps;
+        minus[k] -= eps;
+        let numeric = (objective(&plus) - objective(&minus)) / (2.0 * f64::from(eps));
+        let analytic = f64::from(gradient[k]);
+        assert!(
+            (numeric - analytic).abs() <= 2e-2 * numeric.abs().max(analytic.abs()) + 2e-3,
+            "coordinate {k}: autodiff {analytic}, central difference {numeric}"
+        );
+    }
+}
+
+#[test]
+fn optimize_through_a_gns_runs_and_refuses_a_model_of_other_bounds() {
+    let dir = scratch("optimize-gns");
+    let config = dir.join("tiny.toml");
+    std::fs::write(&config, CONFIG).unwrap();
+    let model = tiny_model(&dir.join("fits"), [0.1, 0.9]);
+    let out = dir.join("run");
+    let stdout = ok(phi()
+        .arg("optimize")
+        .arg(&config)
+        .arg("--out")
+        .arg(&out)
+        .args([
+            "--backend",
+            "burn",
+            "--iterations",
+            "2",
+            "--simulator",
+            "gns",
+            "--model",
+        ])
+        .arg(&model)
+        .output()
+        .unwrap());
+    assert!(
+        stdout.contains("3 iterations of 32 particles through gns"),
+        "{stdout}"
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let losses = summary["summary"]["losses"].as_array().unwrap();
+    assert_eq!(losses.len(), 3);
+    assert!(losses.iter().all(|l| l.as_f64().unwrap().is_finite()));
+    assert!(
+        summary["summary"]["simulator"]
+            .as_str()
+            .unwrap()
+            .starts_with("gns ")
+    );
+
+    let other = tiny_model(&dir.join("other"), [0.0, 1.0]);
+    let message = failed(
+        phi()
+            .arg("optimize")
+            .arg(&config)
+            .arg("--out")
+            .arg(dir.join("refused"))
+            .args(["--backend", "burn", "--simulator", "gns", "--model"])
+            .arg(&other)
+            .output()
+            .unwrap(),
+    );
+    assert!(
+        message.contains("tiny.toml")
+            && message.contains("scene.domain.resolution")
+            && message.contains("bounds [0, 1]"),
+        "{message}"
+    );
+    let missing = failed(
+        phi()
+            .arg("optimize")
+            .arg(&config)
+            .arg("--out")
+            .arg(dir.join("no-model"))
+            .args(["--simulator", "gns"])
+            .output()
+            .unwrap(),
+    );
+    assert!(missing.contains("--model"), "{missing}");
 }

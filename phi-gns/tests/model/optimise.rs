@@ -4,7 +4,7 @@
 
 use phi_core::{AutodiffBackend, Backend, Tensor};
 use phi_gns::data::OBSTACLE;
-use phi_gns::model::{Gns, GnsKernels, GraphBatch, Parameters};
+use phi_gns::model::{Gns, GnsKernels, GraphBatch};
 use phi_gns::train::{
     Adam, AdamConfig, LearningRate, multi_step_loss, non_kinematic_mask, random_walk_noise,
     train_step, train_step_with,
