@@ -197,8 +197,15 @@ fn the_host_sinkhorn_divergence_vanishes_on_equal_sets_and_checks_its_inputs() {
     let b: Vec<f32> = a.iter().map(|x| x + s).collect();
     let shifted = sinkhorn_divergence_host(&a, &b, 2, &options).unwrap();
     let half_w2 = 0.5 * 2.0 * f64::from(s) * f64::from(s);
-    assert!(shifted > 0.5 * half_w2 && shifted <= half_w2 * (1.0 + 1e-6), "{shifted} vs {half_w2}");
-    for (x, y, d) in [(&a[..0], &a[..], 2), (&a[..3], &a[..], 2), (&a[..], &a[..], 0)] {
+    assert!(
+        shifted > 0.5 * half_w2 && shifted <= half_w2 * (1.0 + 1e-6),
+        "{shifted} vs {half_w2}"
+    );
+    for (x, y, d) in [
+        (&a[..0], &a[..], 2),
+        (&a[..3], &a[..], 2),
+        (&a[..], &a[..], 0),
+    ] {
         assert!(sinkhorn_divergence_host(x, y, d, &options).is_err());
     }
     let mut bad = a.clone();
