@@ -105,6 +105,8 @@ fn metadata_that_does_not_match_the_files_is_an_error_naming_file_and_key() {
         *m = Metadata::new(3);
         m.sequence_length = 4;
         m.splits = splits;
+        m.vel_std = vec![1e-3; 3];
+        m.acc_std = vec![1e-4; 3];
     });
     let (path, msg) = open_error(&dir);
     assert!(
