@@ -66,17 +66,23 @@ fn a_trajectory_of_another_split_fails_every_reader() {
         data.join("valid/traj_00000.npz"),
     )
     .unwrap();
-    let gif = dir.join("v.gif");
+    let (gif, npz, tf) = (dir.join("v.gif"), dir.join("npz"), dir.join("tf"));
     let readers: [(&[&str], Vec<&Path>); 4] = [
-        (&["dataset", "stats", "--split", "valid"], vec![&data]),
-        (&["render", "--split", "valid", "--out"], vec![&gif, &data]),
+        (
+            &["dataset", "stats", "--split", "valid"],
+            vec![data.as_path()],
+        ),
+        (
+            &["render", "--split", "valid", "--out"],
+            vec![gif.as_path(), data.as_path()],
+        ),
         (
             &["dataset", "export", "--format", "npz", "--out"],
-            vec![&dir.join("npz"), &data],
+            vec![npz.as_path(), data.as_path()],
         ),
         (
             &["dataset", "export", "--format", "tfrecord", "--out"],
-            vec![&dir.join("tf"), &data],
+            vec![tf.as_path(), data.as_path()],
         ),
     ];
     for (args, paths) in readers {
