@@ -50,6 +50,7 @@ fn trajectory() -> Trajectory {
             count: INDEX + 1,
         },
         resume: false,
+        force: false,
         progress: false,
     })
     .expect("the bench trajectory simulates");

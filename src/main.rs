@@ -4,7 +4,9 @@ use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use phi::backends::BackendKind;
 use std::path::PathBuf;
+use std::process::ExitCode;
 
+use phi::dataset::memory::shorten;
 use phi::demo::{self, DemoReport};
 use phi::phi_flip::Scene;
 use phi::simulate::{SimulateOptions, check_out_dir, simulate};
@@ -17,6 +19,9 @@ use phi::{with_autodiff_backend, with_backend};
     about = "Differentiable liquid simulation and learned simulators"
 )]
 struct Cli {
+    /// On an error, also print where in the program it arose (a backtrace).
+    #[arg(short, long, global = true)]
+    verbose: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -82,14 +87,65 @@ enum Command {
     Eval(phi::gns::eval::EvalArgs),
 }
 
-fn main() -> Result<()> {
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    if cli.verbose {
+        // SAFETY: nothing else runs yet (no thread has been started), so no other code reads the
+        // environment while it changes.
+        unsafe { std::env::set_var("RUST_LIB_BACKTRACE", "1") };
+    }
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
         )
         .with_writer(std::io::stderr)
         .init();
-    match Cli::parse().command {
+    match run(cli.command) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprint!("{}", error_report(&err, cli.verbose));
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// The longest message of an error chain printed whole; longer ones (a value echoed from a
+/// damaged file) are cut.
+const MESSAGE_LIMIT: usize = 4096;
+
+/// What a user sees of an error: the message and its causes, one a line, each cut at
+/// [`MESSAGE_LIMIT`] bytes; with `-v` also the backtrace, where one was captured. A bad input is
+/// not a bug in the program, so its backtrace is noise unless asked for (`RUST_BACKTRACE` in the
+/// environment alone does not print it; panics, which are bugs, print theirs as usual).
+fn error_report(err: &anyhow::Error, verbose: bool) -> String {
+    let mut report = String::new();
+    let mut causes = err.chain();
+    if let Some(top) = causes.next() {
+        report.push_str(&format!(
+            "Error: {}\n",
+            shorten(&top.to_string(), MESSAGE_LIMIT)
+        ));
+    }
+    let causes: Vec<String> = causes
+        .map(|c| shorten(&c.to_string(), MESSAGE_LIMIT))
+        .collect();
+    if !causes.is_empty() {
+        report.push_str("\nCaused by:\n");
+        for (i, cause) in causes.iter().enumerate() {
+            report.push_str(&format!("    {i}: {cause}\n"));
+        }
+    }
+    if verbose {
+        let backtrace = err.backtrace();
+        if backtrace.status() == std::backtrace::BacktraceStatus::Captured {
+            report.push_str(&format!("\nBacktrace:\n{backtrace}\n"));
+        }
+    }
+    report
+}
+
+fn run(command: Command) -> Result<()> {
+    match command {
         Command::Backends => {
             for kind in BackendKind::available() {
                 let autodiff = if kind.has_autodiff() {

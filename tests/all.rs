@@ -6,5 +6,6 @@ mod cli;
 mod conformance;
 #[cfg(feature = "ndarray")]
 mod fields;
+mod parsers;
 #[cfg(feature = "ndarray")]
 mod solve;

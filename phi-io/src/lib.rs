@@ -18,7 +18,9 @@ pub mod npy;
 pub mod npz;
 mod toml_file;
 
-pub use atomic::{write_all, write_atomic};
+pub use atomic::{
+    publish_dir, remove_stale_temp_files, staging_dir, temp_file_pid, write_all, write_atomic,
+};
 pub use error::IoError;
 pub use toml_file::{TomlError, parse_toml, read_toml_text};
 

@@ -44,7 +44,7 @@ pub fn parse_toml<T: DeserializeOwned>(text: &str, origin: &str) -> Result<T, To
     let deserializer = toml::Deserializer::parse(text).map_err(|e| TomlError {
         path: origin.into(),
         key: location(text, e.span()),
-        reason: e.message().to_string(),
+        reason: shorten_quoted(e.message()),
     })?;
     serde_path_to_error::deserialize(deserializer).map_err(|e| {
         let path = e.path().to_string();
@@ -62,10 +62,45 @@ pub fn parse_toml<T: DeserializeOwned>(text: &str, origin: &str) -> Result<T, To
         };
         TomlError {
             path: origin.into(),
-            key,
-            reason,
+            key: shorten(&key, ECHO_LIMIT),
+            reason: shorten_quoted(&reason),
         }
     })
+}
+
+/// The most characters of a value from the input that an error message repeats.
+const ECHO_LIMIT: usize = 80;
+
+/// `text`, or its first `max` characters and its length when longer.
+fn shorten(text: &str, max: usize) -> String {
+    match text.char_indices().nth(max) {
+        None => text.to_string(),
+        Some((cut, _)) => format!("{}… ({} bytes)", &text[..cut], text.len()),
+    }
+}
+
+/// `reason` with every `quoted` value longer than [`ECHO_LIMIT`] shortened: the parsers quote
+/// the unknown key or variant they met, which may be anything the file holds.
+fn shorten_quoted(reason: &str) -> String {
+    let mut out = String::with_capacity(reason.len().min(4 * ECHO_LIMIT));
+    let mut rest = reason;
+    while let Some(open) = rest.find('`') {
+        out.push_str(&rest[..=open]);
+        let after = &rest[open + 1..];
+        match after.find('`') {
+            Some(close) => {
+                out.push_str(&shorten(&after[..close], ECHO_LIMIT));
+                out.push('`');
+                rest = &after[close + 1..];
+            }
+            None => {
+                out.push_str(&shorten(after, ECHO_LIMIT));
+                rest = "";
+            }
+        }
+    }
+    out.push_str(&shorten(rest, 4 * ECHO_LIMIT));
+    out
 }
 
 /// `line L, column C` of a byte span in `text`.
@@ -114,5 +149,22 @@ mod tests {
         assert_eq!(syntax.key, "line 2, column 9");
         let missing = read_toml_text(Path::new("/nonexistent/phi.toml")).unwrap_err();
         assert_eq!(missing.key, "(file)");
+    }
+
+    #[test]
+    fn a_huge_unknown_key_is_echoed_once_and_shortened() {
+        let key = "k".repeat(1_000_000);
+        let e = parse_toml::<Outer>(&format!("[training]\nsteps = 1\n{key} = 2\n"), "a.toml")
+            .unwrap_err();
+        let message = e.to_string();
+        assert!(message.len() < 2_000, "{} bytes", message.len());
+        assert!(message.contains("(1000000 bytes)"), "{message}");
+        assert!(message.contains("unknown field `kkkk"), "{message}");
+        let e = parse_toml::<Outer>(&format!("{key} = 2\n"), "a.toml").unwrap_err();
+        assert_eq!(
+            e.key,
+            format!("{}… (1000000 bytes)", "k".repeat(ECHO_LIMIT))
+        );
+        assert!(e.to_string().len() < 2_000);
     }
 }

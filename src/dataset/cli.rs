@@ -55,18 +55,24 @@ pub enum DatasetCommand {
         /// `npz` or `tfrecord`.
         #[arg(long)]
         format: ExportFormat,
-        /// The directory to write into.
+        /// The directory to write into (absent or empty, unless --force).
         #[arg(long)]
         out: PathBuf,
+        /// Replace the content of a non-empty --out.
+        #[arg(long)]
+        force: bool,
     },
     /// Read DeepMind learning_to_simulate's TFRecord files (`{split}.tfrecord` and
     /// metadata.json) into a phi dataset directory.
     Import {
         /// The directory holding the TFRecord files and metadata.json.
         input: PathBuf,
-        /// The dataset directory to write.
+        /// The dataset directory to write (absent or empty, unless --force).
         #[arg(long)]
         out: PathBuf,
+        /// Replace the content of a non-empty --out (once the import has succeeded).
+        #[arg(long)]
+        force: bool,
     },
 }
 
@@ -112,6 +118,9 @@ pub struct GenerateArgs {
     /// Continue in a directory whose generator.json differs or is missing.
     #[arg(long)]
     pub resume: bool,
+    /// Delete trajectory files beyond --count instead of refusing to run.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// `phi render`.
@@ -134,6 +143,9 @@ pub struct RenderArgs {
     /// Draw every this many frames.
     #[arg(long, default_value_t = 2)]
     pub frame_every: usize,
+    /// Overwrite an existing --out that is not a GIF.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Runs a `phi dataset` command.
@@ -184,30 +196,61 @@ pub fn run(command: DatasetCommand) -> Result<()> {
             }
             Ok(())
         }
-        DatasetCommand::Export { dir, format, out } => {
+        DatasetCommand::Export {
+            dir,
+            format,
+            out,
+            force,
+        } => {
             let dataset = phi_gns::data::Dataset::open(&dir)?;
-            match format {
-                ExportFormat::Npz => {
-                    std::fs::create_dir_all(&out)
-                        .with_context(|| format!("cannot create {}", out.display()))?;
-                    for split in dataset.metadata().splits.keys() {
-                        let file = out.join(format!("{split}.npz"));
-                        let count = phi_gns::data::export_npz(&dataset, split, &file)?;
-                        println!("{split}: {count} trajectories -> {}", file.display());
+            if let (Ok(data), Ok(target)) = (dir.canonicalize(), out.canonicalize())
+                && data.starts_with(&target)
+            {
+                anyhow::bail!(
+                    "--out {} holds the dataset being exported; choose another directory",
+                    out.display()
+                );
+            }
+            let staging = prepare_output(&out, force)?;
+            let written = (|| -> Result<Vec<String>> {
+                let mut lines = Vec::new();
+                match format {
+                    ExportFormat::Npz => {
+                        for split in dataset.metadata().splits.keys() {
+                            let file = staging.join(format!("{split}.npz"));
+                            let count = phi_gns::data::export_npz(&dataset, split, &file)?;
+                            lines.push(format!(
+                                "{split}: {count} trajectories -> {}",
+                                out.join(format!("{split}.npz")).display()
+                            ));
+                        }
+                    }
+                    ExportFormat::Tfrecord => {
+                        phi_gns::data::tfrecord::export_tfrecord(&dataset, &staging)?;
+                        lines.push(format!(
+                            "wrote {}/{{split}}.tfrecord and metadata.json",
+                            out.display()
+                        ));
                     }
                 }
-                ExportFormat::Tfrecord => {
-                    phi_gns::data::tfrecord::export_tfrecord(&dataset, &out)?;
-                    println!(
-                        "wrote {}/{{split}}.tfrecord and metadata.json",
-                        out.display()
-                    );
-                }
+                phi_io::publish_dir(&staging, &out)?;
+                Ok(lines)
+            })();
+            let lines = discard_on_error(written, &staging)?;
+            for line in lines {
+                println!("{line}");
             }
             Ok(())
         }
-        DatasetCommand::Import { input, out } => {
-            let dataset = phi_gns::data::tfrecord::import_tfrecord(&input, &out)?;
+        DatasetCommand::Import { input, out, force } => {
+            let staging = prepare_output(&out, force)?;
+            let imported = (|| -> Result<()> {
+                phi_gns::data::tfrecord::import_tfrecord(&input, &staging)?;
+                phi_io::publish_dir(&staging, &out)?;
+                Ok(())
+            })();
+            discard_on_error(imported, &staging)?;
+            let dataset = phi_gns::data::Dataset::open(&out)?;
             let counts: Vec<String> = dataset
                 .metadata()
                 .splits
@@ -223,6 +266,38 @@ pub fn run(command: DatasetCommand) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// Checks that the directory `out` of a command that writes a whole directory may be written
+/// (absent, empty, or `force`), and makes the staging directory the command fills: `out` is only
+/// replaced, whole, once everything is written ([`phi_io::publish_dir`]).
+fn prepare_output(out: &std::path::Path, force: bool) -> Result<PathBuf> {
+    super::check_dir(out)?;
+    let occupied = out.is_dir()
+        && std::fs::read_dir(out)
+            .with_context(|| format!("reading {}", out.display()))?
+            .next()
+            .is_some();
+    if occupied && !force {
+        anyhow::bail!(
+            "--out {} is not empty; refusing to write into it (choose another --out, or pass \
+             --force to replace its content once the new content is complete)",
+            out.display()
+        );
+    }
+    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("creating {}", parent.display()))?;
+    }
+    Ok(phi_io::staging_dir(out)?)
+}
+
+/// `result`, after removing the staging directory if it is an error.
+fn discard_on_error<T>(result: Result<T>, staging: &std::path::Path) -> Result<T> {
+    if result.is_err() {
+        let _ = std::fs::remove_dir_all(staging);
+    }
+    result
 }
 
 fn run_generate(args: GenerateArgs) -> Result<()> {
@@ -252,11 +327,25 @@ fn run_generate(args: GenerateArgs) -> Result<()> {
         threads: args.threads,
         shard: args.shard,
         resume: args.resume,
+        force: args.force,
         progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
     };
     let summary = generate(&options)?;
+    let mut repaired = String::new();
+    if summary.remade > 0 {
+        repaired.push_str(&format!(
+            ", remade {} damaged or foreign file(s)",
+            summary.remade
+        ));
+    }
+    if summary.stale_removed > 0 {
+        repaired.push_str(&format!(
+            ", removed {} stale temporary file(s)",
+            summary.stale_removed
+        ));
+    }
     println!(
-        "{}: wrote {} trajectories ({}..{} particles), kept {} finished, in {:.1} s{}",
+        "{}: wrote {} trajectories ({}..{} particles), kept {} finished{repaired}, in {:.1} s{}",
         options.out.display(),
         summary.written,
         summary.particles.0,
@@ -287,6 +376,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
         &args.out,
         args.pixels_per_cell,
         args.frame_every,
+        args.force,
     )?;
     println!("wrote {} ({pictures} pictures)", args.out.display());
     Ok(())

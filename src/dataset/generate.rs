@@ -17,8 +17,8 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use phi_flip::{RandomSceneParams, SceneVariant};
 use phi_gns::data::{
-    LIQUID, OBSTACLE, Trajectory, TrajectoryStats, read_trajectory, trajectory_file_name,
-    write_trajectory,
+    LIQUID, OBSTACLE, Trajectory, TrajectoryStats, read_trajectory_and_stats, trajectory_file_name,
+    trajectory_index_from_file_name, write_trajectory,
 };
 use rayon::prelude::*;
 
@@ -26,6 +26,7 @@ use super::manifest::{
     GeneratorConfig, MANIFEST, Manifest, Shard, read_generator, read_manifest,
     write_dataset_metadata, write_manifest,
 };
+use super::memory::check_memory;
 use super::{Split, TEST_SCENES, check_dir, position_scale, simulate_trajectory, trajectory_seed};
 
 /// What `phi dataset generate` does.
@@ -50,6 +51,8 @@ pub struct GenerateOptions {
     pub shard: Shard,
     /// Continue in a directory whose manifest differs or is missing.
     pub resume: bool,
+    /// Delete trajectory files beyond this run's count instead of refusing to.
+    pub force: bool,
     /// Show a progress bar.
     pub progress: bool,
 }
@@ -61,6 +64,10 @@ pub struct GenerateSummary {
     pub written: usize,
     /// Finished files found and kept.
     pub skipped: usize,
+    /// Files found damaged, unreadable or of another trajectory, and made again.
+    pub remade: usize,
+    /// Temporary files that killed runs left behind, removed.
+    pub stale_removed: usize,
     /// Wall time in seconds.
     pub seconds: f64,
     /// Particles per written trajectory, smallest and largest.
@@ -100,6 +107,59 @@ pub fn generate(options: &GenerateOptions) -> Result<GenerateSummary> {
             counts.entry(split).or_insert(count);
         }
     }
+    let jobs_asked: u128 = options
+        .splits
+        .iter()
+        .map(|s| counts[s.name()] as u128 / options.shard.count as u128 + 1)
+        .sum();
+    let job_bytes = (std::mem::size_of::<Job>() + 64 + out.as_os_str().len()) as u128;
+    check_memory(
+        &format!(
+            "{} trajectories ({})",
+            jobs_asked,
+            if options.count.is_some() {
+                "--count"
+            } else {
+                "the counts of generator.json"
+            }
+        ),
+        jobs_asked * job_bytes,
+    )?;
+    let beyond = files_beyond(out, &counts)?;
+    if let Some((split, index, count)) = beyond.first()
+        && !options.force
+    {
+        let last = beyond.iter().map(|b| b.1).max().unwrap_or(*index);
+        bail!(
+            "{} holds {split}/{} beyond the {count} {split} trajectories asked for ({} such \
+             file(s)); pass --count {} or more to keep and extend them, or --force to delete \
+             them",
+            out.display(),
+            trajectory_file_name(*index),
+            beyond.len(),
+            last + 1
+        );
+    }
+    let mut stale_removed = 0;
+    for dir in std::iter::once(out.clone()).chain(Split::ALL.iter().map(|s| out.join(s.name()))) {
+        for path in phi_io::remove_stale_temp_files(&dir)? {
+            tracing::info!("removed {}, left by a killed run", path.display());
+            stale_removed += 1;
+        }
+    }
+    if !beyond.is_empty() {
+        // Without metadata.json the directory is an unfinished dataset until this run ends, so
+        // a kill cannot leave metadata that lists files that are gone.
+        let metadata = out.join(phi_gns::data::METADATA_FILE);
+        if metadata.exists() {
+            std::fs::remove_file(&metadata)
+                .with_context(|| format!("removing {}", metadata.display()))?;
+        }
+        for (split, index, _) in &beyond {
+            let path = out.join(split).join(trajectory_file_name(*index));
+            std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))?;
+        }
+    }
     for split in &options.splits {
         let dir = out.join(split.name());
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -116,6 +176,7 @@ pub fn generate(options: &GenerateOptions) -> Result<GenerateSummary> {
     let steps = options.params.steps;
     let mut jobs = Vec::new();
     let mut skipped = 0;
+    let mut remade = 0;
     for &split in &options.splits {
         let split_seed = split.seed(options.seed);
         for index in (0..counts[split.name()]).filter(|&i| options.shard.holds(i)) {
@@ -124,16 +185,23 @@ pub fn generate(options: &GenerateOptions) -> Result<GenerateSummary> {
                 _ => trajectory_seed(split_seed, index),
             };
             let path = out.join(split.name()).join(trajectory_file_name(index));
-            if is_finished(&path, split, index, seed, steps) {
-                skipped += 1;
-            } else {
-                jobs.push(Job {
-                    split,
-                    index,
-                    seed,
-                    path,
-                });
+            match check_finished(&path, index, (split != Split::Test).then_some(seed), steps) {
+                Ok(true) => {
+                    skipped += 1;
+                    continue;
+                }
+                Ok(false) => {}
+                Err(why) => {
+                    tracing::warn!("{}: {why}; making it again", path.display());
+                    remade += 1;
+                }
             }
+            jobs.push(Job {
+                split,
+                index,
+                seed,
+                path,
+            });
         }
     }
 
@@ -172,6 +240,8 @@ pub fn generate(options: &GenerateOptions) -> Result<GenerateSummary> {
     Ok(GenerateSummary {
         written: jobs.len(),
         skipped,
+        remade,
+        stale_removed,
         seconds: started.elapsed().as_secs_f64(),
         particles: (
             particles.iter().copied().min().unwrap_or(0),
@@ -233,18 +303,65 @@ fn check_compatible(
     Ok(())
 }
 
-/// Whether `path` holds the finished trajectory `index` of `split`: a readable file with the
-/// right index, seed (random splits) and frame count.
-fn is_finished(path: &Path, split: Split, index: usize, seed: u64, steps: usize) -> bool {
-    if !path.is_file() {
-        return false;
+/// Whether `path` holds the finished trajectory `index`: `Ok(false)` when there is no file,
+/// `Ok(true)` for a whole file (every member read and its CRC-32 checked, the statistics
+/// included) with the right index, seed (random splits) and frame count, and an error saying
+/// what is wrong otherwise (damaged, truncated, another trajectory's file).
+fn check_finished(
+    path: &Path,
+    index: usize,
+    seed: Option<u64>,
+    steps: usize,
+) -> std::result::Result<bool, String> {
+    if !path.exists() {
+        return Ok(false);
     }
-    match read_trajectory(path) {
-        Ok(t) => {
-            t.index == index && t.frames == steps + 1 && (split == Split::Test || t.seed == seed)
+    let (t, _) = read_trajectory_and_stats(path).map_err(|e| e.to_string())?;
+    if t.index != index {
+        return Err(format!("it stores index {} instead of {index}", t.index));
+    }
+    if let Some(seed) = seed
+        && t.seed != seed
+    {
+        return Err(format!("it stores seed {} instead of {seed}", t.seed));
+    }
+    if t.frames != steps + 1 {
+        return Err(format!(
+            "it has {} frames, this run makes {}",
+            t.frames,
+            steps + 1
+        ));
+    }
+    Ok(true)
+}
+
+/// The trajectory files of the split folders of `out` whose index is at or past the split's
+/// count in `counts` (or in a split `counts` does not list): `(split, index, count)`, sorted.
+fn files_beyond(
+    out: &Path,
+    counts: &BTreeMap<String, usize>,
+) -> Result<Vec<(String, usize, usize)>> {
+    let mut beyond = Vec::new();
+    for split in Split::ALL {
+        let dir = out.join(split.name());
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        let count = counts.get(split.name()).copied().unwrap_or(0);
+        for entry in entries {
+            let entry = entry.with_context(|| format!("listing {}", dir.display()))?;
+            if let Some(index) = entry
+                .file_name()
+                .to_str()
+                .and_then(trajectory_index_from_file_name)
+                && index >= count
+            {
+                beyond.push((split.name().to_string(), index, count));
+            }
         }
-        Err(_) => false,
     }
+    beyond.sort();
+    Ok(beyond)
 }
 
 /// Simulates one trajectory, scales it and writes it with its statistics; returns its particle

@@ -14,6 +14,7 @@
 pub mod cli;
 pub mod generate;
 pub mod manifest;
+pub mod memory;
 pub mod merge;
 pub mod render;
 pub mod stats;
@@ -91,20 +92,7 @@ impl std::str::FromStr for Split {
     }
 }
 
-/// SplitMix64's output function: a bijective mix of 64 bits, so distinct inputs give distinct,
-/// well-spread seeds.
-pub fn splitmix64(x: u64) -> u64 {
-    let mut z = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
-/// The seed of trajectory `index` of a split: a function of the split seed and the index only,
-/// so the bytes written do not depend on threads, shards or what was generated before.
-pub fn trajectory_seed(split_seed: u64, index: usize) -> u64 {
-    splitmix64(split_seed ^ splitmix64(index as u64))
-}
+pub use phi_gns::data::{splitmix64, trajectory_seed};
 
 /// `(file name, text)` of `scenes/test/<name>.toml`, compiled in.
 macro_rules! test_scene_file {

@@ -1,12 +1,14 @@
 //! `phi render`: one trajectory of a dataset as an animated GIF, and [`DatasetRenderer`], which
 //! draws a dataset's frames (the rollout GIFs of `phi rollout` use it too).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use phi_gns::data::{Dataset, LIQUID, Metadata, read_metadata, read_trajectory};
+use phi_gns::data::{Dataset, LIQUID, METADATA_FILE, Metadata};
 
-use crate::output::{FrameStyle, GifWriter, KIND_LIQUID, KIND_OBSTACLE, RgbImage, render_frame};
+use crate::output::{
+    FrameStyle, GifWriter, KIND_LIQUID, KIND_OBSTACLE, MAX_PIXELS, RgbImage, render_frame,
+};
 
 /// Draws frames of stored positions of a 2D dataset: positions are mapped back to cells with
 /// the metadata's `position_scale` and `position_offset`, on a grid of
@@ -39,15 +41,34 @@ impl DatasetRenderer {
             .map(|[lo, hi]| ((hi - lo) / metadata.position_scale).round().max(1.0) as usize)
             .collect();
         let upper = resolution.iter().map(|&n| n as f32).collect();
+        let style = FrameStyle {
+            pixels_per_cell,
+            ..FrameStyle::default()
+        };
+        if pixels_per_cell == 0 {
+            bail!("--pixels-per-cell must be at least 1");
+        }
+        // In f64, so that no size overflows: the picture render_frame would draw.
+        let side =
+            |n: usize| n as f64 * f64::from(pixels_per_cell) + 2.0 * f64::from(style.frame_width);
+        let (width, height) = (side(resolution[0]), side(resolution[1]));
+        if width * height > MAX_PIXELS as f64 {
+            bail!(
+                "metadata keys bounds {:?} and position_scale {}: a grid of {}x{} cells, drawn at \
+                 {pixels_per_cell} pixels per cell (--pixels-per-cell), is a {width:.0}x{height:.0} \
+                 picture, more than the {MAX_PIXELS} pixels a picture may have",
+                metadata.bounds,
+                metadata.position_scale,
+                resolution[0],
+                resolution[1],
+            );
+        }
         Ok(DatasetRenderer {
             scale: metadata.position_scale as f32,
             offset: metadata.position_offset as f32,
             resolution,
             upper,
-            style: FrameStyle {
-                pixels_per_cell,
-                ..FrameStyle::default()
-            },
+            style,
         })
     }
 
@@ -91,8 +112,13 @@ impl DatasetRenderer {
 /// Renders trajectory `index` of `split` of the dataset in `dir` to the GIF `out`, one picture
 /// every `frame_every` frames; returns the number of pictures (see [`DatasetRenderer`]).
 ///
+/// The dataset is opened and checked ([`Dataset::open`]), and the trajectory read is checked
+/// against its place (index, seed). The GIF is drawn into a temporary file renamed to `out` when
+/// complete. An existing `out` that is not a GIF is refused unless `force`.
+///
 /// # Errors
-/// A missing dataset or trajectory, I/O errors.
+/// A missing or inconsistent dataset or trajectory, an `out` that would destroy another file,
+/// I/O errors.
 pub fn render_trajectory(
     dir: &Path,
     split: &str,
@@ -100,43 +126,87 @@ pub fn render_trajectory(
     out: &Path,
     pixels_per_cell: u32,
     frame_every: usize,
+    force: bool,
 ) -> Result<usize> {
-    let metadata = read_metadata(dir)?;
-    let count = metadata.splits.get(split).copied().with_context(|| {
-        format!(
-            "{}: no split {split:?} (the metadata lists {:?})",
-            dir.display(),
-            metadata.splits.keys().collect::<Vec<_>>()
-        )
-    })?;
+    check_overwrite(out, force)?;
+    let dataset = Dataset::open(dir)?;
+    let metadata = dataset.metadata();
+    let count = dataset.split_len(split)?;
     if index >= count {
         bail!(
             "{}: split {split} has {count} trajectories, no index {index}",
             dir.display()
         );
     }
-    let trajectory = read_trajectory(&Dataset::trajectory_path(dir, split, index))?;
+    let (trajectory, _) = dataset.read_with_stats(split, index)?;
     if trajectory.dim != 2 {
         bail!(
             "rendering needs a 2D dataset, this one is {}D",
             trajectory.dim
         );
     }
-    let renderer = DatasetRenderer::new(&metadata, pixels_per_cell)?;
+    let renderer = DatasetRenderer::new(metadata, pixels_per_cell)
+        .with_context(|| format!("{}", dir.join(METADATA_FILE).display()))?;
     let kinds = DatasetRenderer::kinds(&trajectory.particle_type);
-    let mut gif: Option<GifWriter> = None;
-    let mut pictures = 0;
-    for t in (0..trajectory.frames).step_by(frame_every.max(1)) {
-        let image = renderer.render(trajectory.frame(t), &kinds)?;
-        let writer = match &mut gif {
-            Some(w) => w,
-            None => gif.insert(GifWriter::create(out, image.width, image.height, 5)?),
-        };
-        writer.add_frame(&image)?;
-        pictures += 1;
+    let temp = temp_path(out)?;
+    let result = (|| -> Result<usize> {
+        let mut gif: Option<GifWriter> = None;
+        let mut pictures = 0;
+        for t in (0..trajectory.frames).step_by(frame_every.max(1)) {
+            let image = renderer.render(trajectory.frame(t), &kinds)?;
+            let writer = match &mut gif {
+                Some(w) => w,
+                None => gif.insert(GifWriter::create(&temp, image.width, image.height, 5)?),
+            };
+            writer.add_frame(&image)?;
+            pictures += 1;
+        }
+        if let Some(writer) = gif {
+            writer.finish()?;
+        }
+        std::fs::rename(&temp, out)
+            .with_context(|| format!("renaming {} to {}", temp.display(), out.display()))?;
+        Ok(pictures)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&temp);
     }
-    if let Some(writer) = gif {
-        writer.finish()?;
+    result
+}
+
+/// `.{name}.tmp-{pid}` beside `out`.
+fn temp_path(out: &Path) -> Result<PathBuf> {
+    let name = out
+        .file_name()
+        .with_context(|| format!("--out {} names no file", out.display()))?;
+    let mut temp = std::ffi::OsString::from(".");
+    temp.push(name);
+    temp.push(format!(".tmp-{}", std::process::id()));
+    Ok(out.with_file_name(temp))
+}
+
+/// Refuses to write the GIF `out` over a directory, or over a file that is not a GIF unless
+/// `force` (a GIF is a picture to be drawn again; anything else may be data).
+fn check_overwrite(out: &Path, force: bool) -> Result<()> {
+    if out.is_dir() {
+        bail!(
+            "--out {} is a directory; name the GIF file to write",
+            out.display()
+        );
     }
-    Ok(pictures)
+    if out.exists() && !force {
+        let mut magic = [0u8; 6];
+        let is_gif = std::fs::File::open(out)
+            .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut magic))
+            .is_ok()
+            && (&magic == b"GIF89a" || &magic == b"GIF87a");
+        if !is_gif {
+            bail!(
+                "--out {} exists and is not a GIF; refusing to overwrite it (pass --force to \
+                 replace it)",
+                out.display()
+            );
+        }
+    }
+    Ok(())
 }

@@ -9,7 +9,9 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use phi_gns::data::{Dataset, LIQUID, Trajectory};
+use phi_gns::data::{Dataset, LIQUID, METADATA_FILE, Trajectory};
+
+use super::memory::check_memory;
 use rayon::prelude::*;
 
 use crate::output::{RgbImage, write_png};
@@ -109,6 +111,26 @@ pub fn dataset_stats(options: &StatsOptions) -> Result<StatsReport> {
     let available = dataset.split_len(&split)?;
     let count = available.min(options.limit.max(1));
     let frames = metadata.frames();
+    // The cell list of each worker (two arrays of one usize per cell) and the histograms of every
+    // trajectory measured.
+    let cells: f64 = metadata
+        .bounds
+        .iter()
+        .map(|[lo, hi]| ((hi - lo) / f64::from(options.radius)).ceil().max(1.0) + 2.0)
+        .product();
+    let workers = rayon::current_num_threads().min(count) as f64;
+    let word = std::mem::size_of::<usize>() as f64;
+    let histograms = (count * frames) as f64 * (MAX_NEIGHBOURS + 1) as f64 * 8.0 * 2.0;
+    let estimate = workers * 2.0 * word * (cells + 1.0) + histograms;
+    check_memory(
+        &format!(
+            "--radius {} over the bounds {:?} of {} ({cells:.3e} cells)",
+            options.radius,
+            metadata.bounds,
+            options.dir.join(METADATA_FILE).display()
+        ),
+        estimate.min(u128::MAX as f64) as u128,
+    )?;
     let bounds: Vec<[f32; 2]> = metadata
         .bounds
         .iter()
@@ -168,7 +190,7 @@ pub fn neighbour_histogram(
     // One cell of margin around the bounds catches particles that left them slightly.
     let cells: Vec<usize> = bounds
         .iter()
-        .map(|[lo, hi]| (((hi - lo) / radius).ceil() as usize).max(1) + 2)
+        .map(|[lo, hi]| (((hi - lo) / radius).ceil() as usize).clamp(1, usize::MAX - 2) + 2)
         .collect();
     let cell_of = |p: &[f32]| -> Vec<usize> {
         (0..d)

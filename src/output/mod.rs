@@ -28,8 +28,8 @@ pub use npz::{
 pub use phi_io::IoError;
 pub(crate) use phi_io::write_atomic;
 pub use render::{
-    DEPTH_LEVELS, FrameStyle, GifWriter, KIND_LIQUID, KIND_OBSTACLE, RgbImage, render_frame,
-    side_by_side, write_png,
+    DEPTH_LEVELS, FrameStyle, GifWriter, KIND_LIQUID, KIND_OBSTACLE, MAX_PIXELS, RgbImage,
+    render_frame, side_by_side, write_png,
 };
 
 /// Errors of the output module.

@@ -23,7 +23,7 @@ pub const KIND_OBSTACLE: u8 = 0;
 pub const KIND_LIQUID: u8 = 1;
 
 /// The largest picture [`render_frame`] draws, in pixels (2^28, i.e. 768 MiB of RGB).
-const MAX_PIXELS: u64 = 1 << 28;
+pub const MAX_PIXELS: u64 = 1 << 28;
 
 /// An 8-bit RGB picture.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -7,6 +7,7 @@ use std::process::{Command, Output};
 use phi::output::read_npz;
 
 mod dataset;
+mod dataset_faults;
 mod eval;
 mod optimize;
 mod rollout;

@@ -4,10 +4,10 @@ use std::path::{Path, PathBuf};
 
 use phi_io::npz::{NpyArray, write_npz_streamed};
 
-use super::trajectory::{read_trajectory_and_stats, read_trajectory_shape};
+use super::trajectory::{read_trajectory_and_stats, read_trajectory_identity};
 use super::{
     DataError, Metadata, Trajectory, TrajectoryStats, read_metadata, read_trajectory,
-    read_trajectory_stats, trajectory_file_name, trajectory_index_from_file_name,
+    read_trajectory_stats, trajectory_file_name, trajectory_index_from_file_name, trajectory_seed,
 };
 
 /// A dataset directory whose `metadata.json` has been read and checked against its files.
@@ -66,20 +66,24 @@ impl Dataset {
                 format!("lists {count} trajectories but the folder cannot be read: {e}"),
             )
         })?;
-        let mut present = vec![false; count];
-        let mut extra = Vec::new();
+        // The indices found, bounded by the folder's entries (not by the count the metadata
+        // claims, which may be anything).
+        let mut present = std::collections::BTreeSet::new();
         for entry in entries {
             let entry = entry.map_err(|e| DataError::io(&split_dir, "cannot list", e))?;
             let name = entry.file_name();
-            let Some(index) = name.to_str().and_then(trajectory_index_from_file_name) else {
-                continue;
-            };
-            match present.get_mut(index) {
-                Some(seen) => *seen = true,
-                None => extra.push(index),
+            if let Some(index) = name.to_str().and_then(trajectory_index_from_file_name) {
+                present.insert(index);
             }
         }
-        if let Some(missing) = present.iter().position(|seen| !seen) {
+        // The first index below `count` that has no file (the indices are sorted, so it is the
+        // first place where the k-th one is not k).
+        let missing = present
+            .range(..count)
+            .enumerate()
+            .find(|&(k, &i)| k != i)
+            .map_or_else(|| present.range(..count).count(), |(k, _)| k);
+        if missing < count {
             return Err(DataError::metadata(
                 &split_dir,
                 &key,
@@ -89,7 +93,7 @@ impl Dataset {
                 ),
             ));
         }
-        if let Some(&index) = extra.iter().min() {
+        if let Some(&index) = present.range(count..).next() {
             return Err(DataError::metadata(
                 &split_dir,
                 &key,
@@ -101,8 +105,46 @@ impl Dataset {
         }
         for index in 0..count {
             let path = split_dir.join(trajectory_file_name(index));
-            let (frames, _particles, dim) = read_trajectory_shape(&path)?;
-            self.check_shape(&path, frames, dim)?;
+            let identity = read_trajectory_identity(&path)?;
+            self.check_shape(&path, identity.frames, identity.dim)?;
+            self.check_identity(&path, split, index, identity.index, identity.seed)?;
+        }
+        Ok(())
+    }
+
+    /// Checks a file's stored index and seed against its place: its index in the split, and in
+    /// a split listed under `seeds` the seed derived from the split's ([`trajectory_seed`]).
+    fn check_identity(
+        &self,
+        path: &Path,
+        split: &str,
+        index: usize,
+        stored_index: usize,
+        stored_seed: u64,
+    ) -> Result<(), DataError> {
+        if stored_index != index {
+            return Err(DataError::metadata(
+                path,
+                format!("splits.{split}"),
+                format!(
+                    "the file stores index {stored_index} instead of {index}: it is another \
+                     trajectory's file (moved, swapped or copied)"
+                ),
+            ));
+        }
+        if let Some(&base) = self.metadata.seeds.get(split) {
+            let expected = trajectory_seed(base, index);
+            if stored_seed != expected {
+                return Err(DataError::metadata(
+                    path,
+                    format!("seeds.{split}"),
+                    format!(
+                        "the file stores seed {stored_seed}, but trajectory {index} of split \
+                         '{split}' has seed {expected}: the file belongs to another split or \
+                         another dataset"
+                    ),
+                ));
+            }
         }
         Ok(())
     }
@@ -197,7 +239,7 @@ impl Dataset {
     ) -> Result<(Trajectory, TrajectoryStats), DataError> {
         let path = self.checked_path(split, index)?;
         let (traj, stats) = read_trajectory_and_stats(&path)?;
-        self.check_trajectory(&path, &traj, index)?;
+        self.check_trajectory(&path, split, &traj, index)?;
         Ok((traj, stats))
     }
 
@@ -217,17 +259,12 @@ impl Dataset {
     fn check_trajectory(
         &self,
         path: &Path,
+        split: &str,
         traj: &Trajectory,
         index: usize,
     ) -> Result<(), DataError> {
         self.check_shape(path, traj.frames, traj.dim)?;
-        if traj.index != index {
-            return Err(DataError::invalid(
-                path,
-                format!("the file stores index {} instead of {index}", traj.index),
-            ));
-        }
-        Ok(())
+        self.check_identity(path, split, index, traj.index, traj.seed)
     }
 }
 
@@ -259,7 +296,8 @@ impl Iterator for SplitReader<'_> {
         self.next += 1;
         let path = Dataset::trajectory_path(&self.dataset.dir, &self.split, index);
         Some(read_trajectory(&path).and_then(|traj| {
-            self.dataset.check_trajectory(&path, &traj, index)?;
+            self.dataset
+                .check_trajectory(&path, &self.split, &traj, index)?;
             Ok(traj)
         }))
     }

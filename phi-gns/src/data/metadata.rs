@@ -172,16 +172,61 @@ impl Metadata {
                 return bad(key, format!("{list:?} is not finite"));
             }
         }
-        let finite = self.bounds.iter().flatten().all(|x| x.is_finite())
-            && [
-                self.default_connectivity_radius,
-                self.position_scale,
-                self.position_offset,
-            ]
-            .iter()
-            .all(|x| x.is_finite());
-        if !finite {
-            return bad("bounds", "a value is not finite".into());
+        for (axis, &[lo, hi]) in self.bounds.iter().enumerate() {
+            if !(lo.is_finite() && hi.is_finite()) {
+                return bad(
+                    &format!("bounds[{axis}]"),
+                    format!("[{lo}, {hi}] is not finite"),
+                );
+            }
+            if lo >= hi {
+                return bad(
+                    &format!("bounds[{axis}]"),
+                    format!(
+                        "[{lo}, {hi}] is empty or reversed (the minimum must be below the maximum)"
+                    ),
+                );
+            }
+        }
+        if !(self.position_scale.is_finite() && self.position_scale > 0.0) {
+            return bad(
+                "position_scale",
+                format!("{} (must be a positive number)", self.position_scale),
+            );
+        }
+        if !self.position_offset.is_finite() {
+            return bad(
+                "position_offset",
+                format!("{} is not finite", self.position_offset),
+            );
+        }
+        let radius = self.default_connectivity_radius;
+        if !(radius.is_finite() && radius > 0.0) {
+            return bad(
+                "default_connectivity_radius",
+                format!("{radius} (must be a positive number)"),
+            );
+        }
+        let training = self.splits.get("train").copied().unwrap_or(0);
+        for (key, std) in [("vel_std", &self.vel_std), ("acc_std", &self.acc_std)] {
+            if let Some(s) = std.iter().find(|s| **s < 0.0) {
+                return bad(
+                    key,
+                    format!("{std:?} holds {s}, a negative standard deviation"),
+                );
+            }
+            // A training split whose liquid moved has spread in its velocities and
+            // accelerations; all zeros are statistics that were never filled in, and cannot
+            // normalise a model's inputs.
+            if training > 0 && std.iter().all(|s| *s == 0.0) {
+                return bad(
+                    key,
+                    format!(
+                        "{std:?} for a train split of {training} trajectories: the statistics \
+                         are missing (all zero), and a standard deviation of 0 cannot normalise"
+                    ),
+                );
+            }
         }
         if !(self.dt > 0.0 && self.dt.is_finite()) {
             return bad("dt", format!("{} (must be positive)", self.dt));

@@ -27,6 +27,10 @@
 //! | `seed` | i64 | `[1]` | the generator's seed (a `u64` stored bit for bit) |
 //! | `index` | i64 | `[1]` | the trajectory's index in its split |
 //!
+//! The stored `index` must be the file's index, and in a split that `metadata.json` lists under
+//! `seeds` the stored seed must be [`trajectory_seed`]`(seeds[split], index)`: a file moved to
+//! another split or index, or copied from another dataset, is refused on reading.
+//!
 //! Stored positions are `x_stored = x_cells * position_scale + position_offset` (1/40 and 0.1 for
 //! the thesis' 32×32-cell domain, which maps it onto `[0.1, 0.9]²`, DeepMind's `bounds`).
 //!
@@ -81,14 +85,30 @@ pub use metadata::{
 pub use phi_io::IoError;
 pub use stats::{Moments, TrajectoryStats};
 pub use trajectory::{
-    Trajectory, read_trajectory, read_trajectory_stats, trajectory_file_name,
-    trajectory_index_from_file_name, write_trajectory,
+    Trajectory, read_trajectory, read_trajectory_and_stats, read_trajectory_stats,
+    trajectory_file_name, trajectory_index_from_file_name, write_trajectory,
 };
 
 /// Particle type of obstacle and boundary particles (static).
 pub const OBSTACLE: i64 = 0;
 /// Particle type of liquid particles.
 pub const LIQUID: i64 = 1;
+
+/// SplitMix64's output function: a bijective mix of 64 bits, so distinct inputs give distinct,
+/// well-spread seeds.
+pub fn splitmix64(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// The seed of trajectory `index` of a split whose base seed (`metadata.json`'s `seeds`) is
+/// `split_seed`: a function of the two only, so a file's stored seed tells which split and index
+/// it was made for. [`Dataset`] checks every file of a split listed in `seeds` against it.
+pub fn trajectory_seed(split_seed: u64, index: usize) -> u64 {
+    splitmix64(split_seed ^ splitmix64(index as u64))
+}
 
 /// The split names of the thesis' datasets, in the order they are usually listed.
 pub const SPLITS: [&str; 3] = ["train", "valid", "test"];
@@ -138,6 +158,13 @@ pub enum DataError {
         record: u64,
         /// What is wrong.
         reason: String,
+    },
+    /// A directory to be written holds files already, which writing would overwrite or mix
+    /// with.
+    #[error("'{path}' is not empty: refusing to write a dataset into it", path = path.display())]
+    NotEmpty {
+        /// The directory.
+        path: PathBuf,
     },
     /// The dataset has no split of that name.
     #[error("'{path}': no split '{split}' (the metadata lists {known:?})", path = path.display())]

@@ -640,7 +640,19 @@ fn read_tfrecord_metadata(dir: &Path) -> Result<(Metadata, bool), DataError> {
 /// its statistics computed from its positions. Every record must have `sequence_length + 1`
 /// frames; a damaged, truncated or malformed record is a [`DataError::Record`] naming the file
 /// and the record's number.
+///
+/// `out_dir` must be absent or empty ([`DataError::NotEmpty`] otherwise), so that an import never
+/// overwrites a dataset or mixes with one; a failed import leaves a partial `out_dir` without
+/// `metadata.json` (`phi dataset import` imports into a staging directory and moves it into place
+/// only when complete).
 pub fn import_tfrecord(in_dir: &Path, out_dir: &Path) -> Result<Dataset, DataError> {
+    if let Ok(mut entries) = std::fs::read_dir(out_dir)
+        && entries.next().is_some()
+    {
+        return Err(DataError::NotEmpty {
+            path: out_dir.to_path_buf(),
+        });
+    }
     let (mut metadata, ours) = read_tfrecord_metadata(in_dir)?;
     let splits: Vec<String> = if ours {
         metadata.splits.keys().cloned().collect()

@@ -274,10 +274,9 @@ pub fn read_trajectory(path: &Path) -> Result<Trajectory, DataError> {
     read_trajectory_from(&mut npz)
 }
 
-/// Reads a trajectory and its stored statistics (checking that they have its dimension).
-pub(crate) fn read_trajectory_and_stats(
-    path: &Path,
-) -> Result<(Trajectory, TrajectoryStats), DataError> {
+/// Reads a trajectory and its stored statistics (checking that they have its dimension): every
+/// member of the file is read and its CRC-32 checked, so a file this accepts is whole.
+pub fn read_trajectory_and_stats(path: &Path) -> Result<(Trajectory, TrajectoryStats), DataError> {
     let mut npz = NpzReader::open(path)?;
     let traj = read_trajectory_from(&mut npz)?;
     let stats = read_stats(&mut npz)?;
@@ -335,19 +334,40 @@ pub fn read_trajectory_stats(path: &Path) -> Result<TrajectoryStats, DataError> 
     read_stats(&mut npz)
 }
 
-/// The `(frames, particles, dim)` of a trajectory file's positions, read from the `.npy` header
-/// only (the data is not read, nor its CRC-32 checked).
-pub(crate) fn read_trajectory_shape(path: &Path) -> Result<(usize, usize, usize), DataError> {
+/// What [`read_trajectory_identity`] reads of a trajectory file.
+pub(crate) struct TrajectoryIdentity {
+    pub(crate) frames: usize,
+    pub(crate) dim: usize,
+    pub(crate) seed: u64,
+    pub(crate) index: usize,
+}
+
+/// The frame count and dimension of a trajectory file's positions (from the `.npy` header
+/// only; the positions are not read, nor their CRC-32 checked) and its stored seed and index
+/// (two small members, CRC-checked).
+pub(crate) fn read_trajectory_identity(path: &Path) -> Result<TrajectoryIdentity, DataError> {
     let mut npz = NpzReader::open(path)?;
     let header = npz.header("position")?;
-    match header.shape[..] {
-        [frames, particles, dim] if header.descr == "<f4" => Ok((frames, particles, dim)),
-        _ => Err(DataError::invalid(
-            path,
-            format!(
-                "'position' is '{}' of shape {:?}, expected '<f4' of shape [frames, n, dim]",
-                header.descr, header.shape
-            ),
-        )),
-    }
+    let (frames, dim) = match header.shape[..] {
+        [frames, _particles, dim] if header.descr == "<f4" => (frames, dim),
+        _ => {
+            return Err(DataError::invalid(
+                path,
+                format!(
+                    "'position' is '{}' of shape {:?}, expected '<f4' of shape [frames, n, dim]",
+                    header.descr, header.shape
+                ),
+            ));
+        }
+    };
+    let seed = read_scalar_i64(&mut npz, "seed")? as u64;
+    let index = read_scalar_i64(&mut npz, "index")?;
+    let index = usize::try_from(index)
+        .map_err(|_| DataError::invalid(path, format!("'index' is negative ({index})")))?;
+    Ok(TrajectoryIdentity {
+        frames,
+        dim,
+        seed,
+        index,
+    })
 }

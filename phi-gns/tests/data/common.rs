@@ -75,7 +75,7 @@ pub fn write_sample_dataset(
         let mut split_stats = TrajectoryStats::new(dim);
         let mut trajectories = Vec::new();
         for index in 0..count {
-            let seed = 1000 * s as u64 + index as u64;
+            let seed = phi_gns::data::trajectory_seed(1000 * s as u64, index);
             let traj = sample_trajectory(seed, index, frames, 5 + index, 3, dim);
             let stats = TrajectoryStats::of(&traj);
             split_stats.merge(&stats).unwrap();

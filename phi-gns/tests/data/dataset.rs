@@ -105,6 +105,8 @@ fn metadata_that_does_not_match_the_files_is_an_error_naming_file_and_key() {
         *m = Metadata::new(3);
         m.sequence_length = 4;
         m.splits = splits;
+        m.vel_std = vec![1e-3; 3];
+        m.acc_std = vec![1e-4; 3];
     });
     let (path, msg) = open_error(&dir);
     assert!(
@@ -231,5 +233,110 @@ fn export_npz_holds_every_trajectory_of_the_split() {
     } else {
         println!("note: no Python with numpy; checked the export with our reader only");
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The error `Metadata::validate` gives after `edit`, as `key: reason`.
+fn validation_error(edit: impl FnOnce(&mut Metadata)) -> String {
+    let mut metadata = Metadata::new(2);
+    metadata.splits.insert("train".into(), 2);
+    metadata.vel_std = vec![1e-3, 2e-3];
+    metadata.acc_std = vec![1e-4, 2e-4];
+    let path = std::path::Path::new("data/metadata.json");
+    metadata.validate(path).unwrap();
+    edit(&mut metadata);
+    match metadata.validate(path).unwrap_err() {
+        DataError::Metadata { path, key, reason } => {
+            assert_eq!(path, std::path::Path::new("data/metadata.json"));
+            format!("{key}: {reason}")
+        }
+        other => panic!("expected a metadata error, got {other}"),
+    }
+}
+
+#[test]
+fn metadata_values_out_of_range_are_errors_naming_the_key() {
+    for (scale, shown) in [(0.0, "0"), (-0.025, "-0.025"), (f64::INFINITY, "inf")] {
+        let msg = validation_error(|m| m.position_scale = scale);
+        assert_eq!(
+            msg,
+            format!("position_scale: {shown} (must be a positive number)")
+        );
+    }
+    let msg = validation_error(|m| m.bounds[1] = [0.9, 0.1]);
+    assert!(
+        msg.starts_with("bounds[1]: [0.9, 0.1] is empty or reversed"),
+        "{msg}"
+    );
+    let msg = validation_error(|m| m.bounds[0] = [0.5, 0.5]);
+    assert!(msg.starts_with("bounds[0]: [0.5, 0.5] is empty"), "{msg}");
+    let msg = validation_error(|m| m.bounds[0] = [f64::NEG_INFINITY, 0.9]);
+    assert_eq!(msg, "bounds[0]: [-inf, 0.9] is not finite");
+    let msg = validation_error(|m| m.position_offset = f64::NAN);
+    assert_eq!(msg, "position_offset: NaN is not finite");
+    let msg = validation_error(|m| m.default_connectivity_radius = 0.0);
+    assert!(msg.starts_with("default_connectivity_radius: 0 "), "{msg}");
+    let msg = validation_error(|m| m.vel_std = vec![0.0, 0.0]);
+    assert!(
+        msg.starts_with("vel_std: [0.0, 0.0] for a train split of 2"),
+        "{msg}"
+    );
+    let msg = validation_error(|m| m.acc_std = vec![1e-4, -1e-4]);
+    assert!(msg.contains("negative standard deviation"), "{msg}");
+    // Without a training split there are no statistics to have: zeros are what `new` writes.
+    let mut test_only = Metadata::new(2);
+    test_only.splits.insert("test".into(), 1);
+    test_only.validate(std::path::Path::new("m.json")).unwrap();
+}
+
+#[test]
+fn a_file_moved_to_another_split_or_index_is_refused() {
+    let dir = temp_dir("dataset-identity");
+    write_sample_dataset(&dir, &[("train", 2), ("valid", 2)], 4, 2);
+    Dataset::open(&dir).unwrap();
+    let train0 = Dataset::trajectory_path(&dir, "train", 0);
+    let train1 = Dataset::trajectory_path(&dir, "train", 1);
+    let valid0 = Dataset::trajectory_path(&dir, "valid", 0);
+    let original = std::fs::read(&valid0).unwrap();
+
+    // Another split's file of the same index: only its seed tells.
+    std::fs::copy(&train0, &valid0).unwrap();
+    let (path, msg) = open_error(&dir);
+    assert!(path.ends_with("valid/traj_00000.npz"), "{path}");
+    assert!(
+        msg.starts_with("seeds.valid: the file stores seed"),
+        "{msg}"
+    );
+    std::fs::write(&valid0, &original).unwrap();
+    Dataset::open(&dir).unwrap();
+
+    // Two files of a split swapped.
+    let (a, b) = (
+        std::fs::read(&train0).unwrap(),
+        std::fs::read(&train1).unwrap(),
+    );
+    std::fs::write(&train0, &b).unwrap();
+    std::fs::write(&train1, &a).unwrap();
+    let (path, msg) = open_error(&dir);
+    assert!(path.ends_with("train/traj_00000.npz"), "{path}");
+    assert!(
+        msg.starts_with("splits.train: the file stores index 1 instead of 0"),
+        "{msg}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_huge_claimed_count_is_a_missing_file_not_an_allocation() {
+    let dir = temp_dir("dataset-huge-count");
+    write_sample_dataset(&dir, &[("train", 2)], 4, 2);
+    edit_metadata(&dir, |m| {
+        *m.splits.get_mut("train").unwrap() = 1_000_000_000_000_000
+    });
+    let (_, msg) = open_error(&dir);
+    assert!(
+        msg.starts_with("splits.train: lists 1000000000000000 trajectories but 'traj_00002.npz'"),
+        "{msg}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -1,0 +1,373 @@
+//! The dataset commands under faults: files swapped or damaged, kills, targets that hold data,
+//! requests too large for memory, and what users see of errors.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use phi::phi_gns::data::{Dataset, read_metadata, read_trajectory};
+
+use super::{ok, phi, scratch};
+
+/// `phi dataset generate --out OUT --steps 2 --count N --split SPLIT [extra]`.
+fn generate(out: &Path, split: &str, count: usize, extra: &[&str]) -> Output {
+    phi()
+        .args(["dataset", "generate", "--steps", "2", "--split", split])
+        .args(["--count", &count.to_string(), "--out"])
+        .arg(out)
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
+/// `phi ARGS... PATHS...`.
+fn run(args: &[&str], paths: &[&Path]) -> Output {
+    let mut command: Command = phi();
+    command.args(args).args(paths);
+    command.output().unwrap()
+}
+
+/// The standard error of a run that must have failed.
+fn fails(output: Output) -> String {
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert!(
+        !output.status.success(),
+        "expected a failure; stdout: {}\nstderr: {stderr}",
+        String::from_utf8_lossy(&output.stdout)
+    );
+    stderr
+}
+
+/// Every file under `dir` with its bytes, sorted by path.
+fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut all = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                all.push((path.clone(), std::fs::read(&path).unwrap()));
+            }
+        }
+    }
+    all.sort();
+    all
+}
+
+#[test]
+fn a_trajectory_of_another_split_fails_every_reader() {
+    let dir = scratch("faults-swap");
+    let data = dir.join("data");
+    ok(generate(&data, "train", 2, &[]));
+    ok(generate(&data, "valid", 1, &[]));
+    std::fs::copy(
+        data.join("train/traj_00000.npz"),
+        data.join("valid/traj_00000.npz"),
+    )
+    .unwrap();
+    let (gif, npz, tf) = (dir.join("v.gif"), dir.join("npz"), dir.join("tf"));
+    let readers: [(&[&str], Vec<&Path>); 4] = [
+        (
+            &["dataset", "stats", "--split", "valid"],
+            vec![data.as_path()],
+        ),
+        (
+            &["render", "--split", "valid", "--out"],
+            vec![gif.as_path(), data.as_path()],
+        ),
+        (
+            &["dataset", "export", "--format", "npz", "--out"],
+            vec![npz.as_path(), data.as_path()],
+        ),
+        (
+            &["dataset", "export", "--format", "tfrecord", "--out"],
+            vec![tf.as_path(), data.as_path()],
+        ),
+    ];
+    for (args, paths) in readers {
+        let stderr = fails(run(args, &paths));
+        assert!(
+            stderr.contains("valid/traj_00000.npz") && stderr.contains("seeds.valid"),
+            "{args:?}: {stderr}"
+        );
+    }
+    assert!(!gif.exists() && !dir.join("npz").exists() && !dir.join("tf").exists());
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// The offset of the data of member `name` in the `.npz` archive `bytes`, from its local header.
+fn member_data(bytes: &[u8], name: &str) -> usize {
+    let file_name = format!("{name}.npy");
+    let header = bytes
+        .windows(4)
+        .enumerate()
+        .filter(|(_, w)| *w == b"PK\x03\x04")
+        .map(|(i, _)| i)
+        .find(|&i| bytes[i + 30..].starts_with(file_name.as_bytes()))
+        .unwrap();
+    let name_len = u16::from_le_bytes([bytes[header + 26], bytes[header + 27]]) as usize;
+    let extra_len = u16::from_le_bytes([bytes[header + 28], bytes[header + 29]]) as usize;
+    header + 30 + name_len + extra_len
+}
+
+#[test]
+fn resume_remakes_damaged_files_and_removes_stale_temporary_files() {
+    let dir = scratch("faults-resume");
+    let data = dir.join("data");
+    ok(generate(&data, "train", 3, &[]));
+    let good = snapshot(&data);
+    // Damage the statistics of file 0 (which reading the positions alone does not see), the
+    // central directory of file 1, and leave the empty temporary file of a killed run.
+    let zero = data.join("train/traj_00000.npz");
+    let mut bytes = std::fs::read(&zero).unwrap();
+    let at = member_data(&bytes, "stats_velocity") + 140;
+    bytes[at] ^= 0x10;
+    std::fs::write(&zero, &bytes).unwrap();
+    let one = data.join("train/traj_00001.npz");
+    let mut bytes = std::fs::read(&one).unwrap();
+    let central = bytes.windows(4).rposition(|w| w == b"PK\x01\x02").unwrap();
+    bytes[central + 46] ^= 0x01; // the first byte of the last entry's name
+    std::fs::write(&one, &bytes).unwrap();
+    let stale = data.join("train/.traj_00002.npz.tmp-4194305");
+    std::fs::write(&stale, b"").unwrap();
+    // Readers call the damage corrupt, not missing.
+    let stderr = fails(run(
+        &["dataset", "export", "--format", "npz", "--out"],
+        &[&dir.join("x"), &data],
+    ));
+    assert!(
+        stderr.contains("corrupt") && !stderr.contains("has no array"),
+        "{stderr}"
+    );
+
+    let stdout = ok(generate(&data, "train", 3, &[]));
+    assert!(
+        stdout.contains("wrote 2 trajectories") && stdout.contains("kept 1 finished"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("remade 2 damaged or foreign file(s)"),
+        "{stdout}"
+    );
+    if Path::new("/proc/self").exists() {
+        assert!(
+            stdout.contains("removed 1 stale temporary file(s)"),
+            "{stdout}"
+        );
+        assert!(!stale.exists());
+    }
+    assert_eq!(
+        snapshot(&data),
+        good,
+        "the remade files are the original bytes"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_smaller_count_is_refused_unless_forced() {
+    let dir = scratch("faults-count");
+    let data = dir.join("data");
+    ok(generate(&data, "train", 2, &[]));
+    let before = snapshot(&data);
+    let stderr = fails(generate(&data, "train", 1, &[]));
+    assert!(
+        stderr.contains("train/traj_00001.npz")
+            && stderr.contains("--count 2")
+            && stderr.contains("--force"),
+        "{stderr}"
+    );
+    assert_eq!(snapshot(&data), before);
+    ok(generate(&data, "train", 1, &["--force"]));
+    let dataset = Dataset::open(&data).unwrap();
+    assert_eq!(dataset.metadata().splits["train"], 1);
+    assert!(!data.join("train/traj_00001.npz").exists());
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn import_export_and_render_never_overwrite_data_unless_forced() {
+    let dir = scratch("faults-overwrite");
+    let data = dir.join("data");
+    let other = dir.join("other");
+    ok(generate(&data, "train", 2, &[]));
+    ok(generate(&other, "train", 1, &["--seed", "5"]));
+    let records = dir.join("records");
+    ok(run(
+        &["dataset", "export", "--format", "tfrecord", "--out"],
+        &[&records, &other],
+    ));
+
+    // Import over a dataset: refused, the dataset untouched.
+    let before = snapshot(&data);
+    let stderr = fails(run(&["dataset", "import", "--out"], &[&data, &records]));
+    assert!(
+        stderr.contains("not empty") && stderr.contains("--force"),
+        "{stderr}"
+    );
+    assert_eq!(snapshot(&data), before);
+    // A failing import (a damaged record) with --force leaves the old dataset whole.
+    let damaged = dir.join("damaged");
+    std::fs::create_dir_all(&damaged).unwrap();
+    std::fs::copy(records.join("metadata.json"), damaged.join("metadata.json")).unwrap();
+    let mut bytes = std::fs::read(records.join("train.tfrecord")).unwrap();
+    let middle = bytes.len() / 2;
+    bytes[middle] ^= 0xFF;
+    std::fs::write(damaged.join("train.tfrecord"), &bytes).unwrap();
+    fails(run(
+        &["dataset", "import", "--force", "--out"],
+        &[&data, &damaged],
+    ));
+    assert_eq!(snapshot(&data), before);
+    // With --force a good import replaces it whole.
+    ok(run(
+        &["dataset", "import", "--force", "--out"],
+        &[&data, &records],
+    ));
+    assert_eq!(read_metadata(&data).unwrap().splits["train"], 1);
+    assert_eq!(
+        read_trajectory(&data.join("train/traj_00000.npz")).unwrap(),
+        read_trajectory(&other.join("train/traj_00000.npz")).unwrap()
+    );
+    assert!(!data.join("train/traj_00001.npz").exists());
+    let leftovers: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+
+    // Export into a folder holding anything: refused; into the dataset itself: refused.
+    let notes = dir.join("notes");
+    std::fs::create_dir_all(&notes).unwrap();
+    std::fs::write(notes.join("a.txt"), "mine").unwrap();
+    let stderr = fails(run(
+        &["dataset", "export", "--format", "npz", "--out"],
+        &[&notes, &other],
+    ));
+    assert!(stderr.contains("not empty"), "{stderr}");
+    assert_eq!(std::fs::read(notes.join("a.txt")).unwrap(), b"mine");
+    let stderr = fails(run(
+        &["dataset", "export", "--format", "npz", "--force", "--out"],
+        &[&other, &other],
+    ));
+    assert!(stderr.contains("holds the dataset"), "{stderr}");
+    Dataset::open(&other).unwrap();
+
+    // Render over a file that is not a GIF: refused; over a GIF: redrawn.
+    let metadata = other.join("metadata.json");
+    let text = std::fs::read(&metadata).unwrap();
+    let stderr = fails(run(
+        &["render", "--split", "train", "--out"],
+        &[&metadata, &other],
+    ));
+    assert!(stderr.contains("is not a GIF"), "{stderr}");
+    assert_eq!(std::fs::read(&metadata).unwrap(), text);
+    let gif = dir.join("t.gif");
+    ok(run(
+        &["render", "--split", "train", "--out"],
+        &[&gif, &other],
+    ));
+    ok(run(
+        &["render", "--split", "train", "--out"],
+        &[&gif, &other],
+    ));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn requests_too_large_for_memory_are_refused_naming_the_key() {
+    let dir = scratch("faults-memory");
+    let data = dir.join("data");
+    ok(generate(&data, "train", 1, &[]));
+    let with_limit = |args: &[&str], paths: &[&Path]| {
+        let mut command = phi();
+        command.env("PHI_MEMORY_LIMIT", "1G").args(args).args(paths);
+        command.output().unwrap()
+    };
+    let stderr = fails(with_limit(
+        &["dataset", "stats", "--radius", "1e-6"],
+        &[&data],
+    ));
+    assert!(
+        stderr.contains("--radius 0.000001")
+            && stderr.contains("metadata.json")
+            && stderr.contains("more than the limit of 1.0 GiB"),
+        "{stderr}"
+    );
+    let stderr = fails(with_limit(
+        &[
+            "dataset",
+            "generate",
+            "--split",
+            "train",
+            "--count",
+            "1000000000000000",
+            "--out",
+        ],
+        &[&dir.join("big")],
+    ));
+    assert!(
+        stderr.contains("--count") && stderr.contains("more than the limit"),
+        "{stderr}"
+    );
+
+    // Bounds up to 1e9: stats refuses its cell list, render names the keys of the picture.
+    let path = data.join("metadata.json");
+    let mut json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    json["bounds"] = serde_json::json!([[0.0, 1e9], [0.0, 1e9]]);
+    std::fs::write(&path, serde_json::to_vec(&json).unwrap()).unwrap();
+    let stderr = fails(with_limit(&["dataset", "stats"], &[&data]));
+    assert!(stderr.contains("--radius 0.03 over the bounds"), "{stderr}");
+    let stderr = fails(run(
+        &["render", "--split", "train", "--out"],
+        &[&dir.join("r.gif"), &data],
+    ));
+    assert!(
+        stderr.contains("metadata.json")
+            && stderr.contains("bounds")
+            && stderr.contains("position_scale")
+            && stderr.contains("--pixels-per-cell"),
+        "{stderr}"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn users_see_the_error_chain_and_backtraces_only_with_verbose() {
+    let dir = scratch("faults-messages");
+    let config = dir.join("gen.toml");
+    let key = "k".repeat(1 << 20);
+    std::fs::write(&config, format!("{key} = 1\n")).unwrap();
+    let generate = |verbose: bool| {
+        let mut command = phi();
+        command
+            .env("RUST_BACKTRACE", "1")
+            .args(["dataset", "generate", "--out"]);
+        command.arg(dir.join("data")).arg("--config").arg(&config);
+        if verbose {
+            command.arg("-v");
+        }
+        command.output().unwrap()
+    };
+    let stderr = fails(generate(false));
+    assert!(
+        stderr.starts_with("Error: ") && stderr.contains("gen.toml"),
+        "{stderr}"
+    );
+    assert!(stderr.len() < 2_000, "{} bytes of error", stderr.len());
+    assert_eq!(
+        stderr.matches("kkkkkkkkkk").count(),
+        2,
+        "key and reason, each shortened"
+    );
+    assert!(
+        !stderr.contains("Backtrace") && !stderr.contains("backtrace"),
+        "{stderr}"
+    );
+    let stderr = fails(generate(true));
+    assert!(stderr.contains("Backtrace:"), "{stderr}");
+    let _ = std::fs::remove_dir_all(dir);
+}
