@@ -16,7 +16,10 @@ use phi::{with_autodiff_backend, with_backend};
 #[command(
     name = "phi",
     version,
-    about = "Differentiable liquid simulation and learned simulators"
+    about = "Differentiable liquid simulation and learned simulators",
+    after_help = "Logging goes to stderr at level info; set RUST_LOG to change it, e.g. \
+                  RUST_LOG=warn (quieter), RUST_LOG=debug, or RUST_LOG=phi_gns=debug (one crate). \
+                  Progress bars are drawn only when stderr is a terminal."
 )]
 struct Cli {
     /// On an error, also print where in the program it arose (a backtrace).
@@ -61,6 +64,10 @@ enum Command {
         /// Rewrite the trajectory file every this many steps, so a killed run keeps them.
         #[arg(long, default_value_t = 25)]
         checkpoint_every: usize,
+        /// Write a VTK frame (vtk/frame_NNNNN.vtu, listed in simulation.pvd) every this many
+        /// steps, for ParaView (0: none).
+        #[arg(long, default_value_t = 0)]
+        vtk_every: usize,
     },
     /// Generate, merge and inspect FLIP datasets (thesis section 5.2).
     Dataset {
@@ -171,6 +178,7 @@ fn run(command: Command) -> Result<()> {
             frame_every,
             pixels_per_cell,
             checkpoint_every,
+            vtk_every,
         } => run_simulate(
             SimulateOptions {
                 scene,
@@ -179,6 +187,7 @@ fn run(command: Command) -> Result<()> {
                 checkpoint_every,
                 pixels_per_cell,
                 steps,
+                vtk_every,
                 progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
             },
             backend,
@@ -236,12 +245,17 @@ fn run_simulate(
         summary.max_displacement_cells,
     );
     println!(
-        "wrote {}/trajectory.npz, run.json{}",
+        "wrote {}/trajectory.npz, run.json{}{}",
         options.out.display(),
         if summary.frames > 0 {
             format!(", {} frames and simulation.gif", summary.frames)
         } else {
             String::new()
+        },
+        if options.vtk_every > 0 {
+            ", simulation.pvd and vtk/"
+        } else {
+            ""
         }
     );
     Ok(())

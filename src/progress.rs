@@ -1,4 +1,5 @@
-//! The progress bar of step-by-step runs (`phi simulate`, `phi rollout`).
+//! Progress bars: of step-by-step runs (`phi simulate`, `phi rollout`) and of work over
+//! trajectories (`phi dataset export`, `import`, `stats`).
 
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -15,6 +16,23 @@ pub fn step_bar(steps: usize, show: bool) -> ProgressBar {
         )
         .expect("a valid template")
         .progress_chars("=> "),
+    );
+    bar
+}
+
+/// A bar of `len` items (`unit`, e.g. "trajectories") on stderr, or a hidden one unless `show`.
+pub fn count_bar(len: usize, unit: &str, show: bool) -> ProgressBar {
+    if !show {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(len as u64);
+    let template = format!(
+        "{{spinner}} {{elapsed_precise}} [{{bar:40}}] {{pos}}/{{len}} {unit}, ETA {{eta}} {{msg}}"
+    );
+    bar.set_style(
+        ProgressStyle::with_template(&template)
+            .expect("a valid template")
+            .progress_chars("=> "),
     );
     bar
 }

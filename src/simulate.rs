@@ -11,6 +11,9 @@
 //! - `run.json`: the scene, the backend, and run facts; `"complete": false` until the last step
 //!   is written.
 //! - `frames/frame_NNNNN.png` and `simulation.gif` (written frame by frame).
+//! - with `vtk_every > 0`: `vtk/frame_NNNNN.vtu` every `vtk_every` steps and `simulation.pvd`,
+//!   the series with its times, for ParaView (positions in cells, velocity in cells per second,
+//!   `particle_type` 1 = liquid).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -22,6 +25,7 @@ use phi_core::fields::LatticeKernels;
 use phi_flip::{Particles, Scene};
 use serde::Serialize;
 
+use crate::output::vtk::{VtkFrame, VtkSeries};
 use crate::output::{
     ArrayData, FrameStyle, GifWriter, KIND_LIQUID, NpyArray, OutputError, render_frame,
     write_atomic, write_npz, write_png,
@@ -42,6 +46,9 @@ pub struct SimulateOptions {
     pub pixels_per_cell: u32,
     /// Override of the scene's step count.
     pub steps: Option<usize>,
+    /// Write a VTK frame every this many steps (0: none): `vtk/frame_NNNNN.vtu` and
+    /// `simulation.pvd` ([`crate::output::vtk`]).
+    pub vtk_every: usize,
     /// Show a progress bar.
     pub progress: bool,
 }
@@ -133,6 +140,12 @@ pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> 
         affine: apic.then(|| p.affine_or_zeros().to_vec()),
     };
     history.push(record(&particles));
+    let mut vtk = (options.vtk_every > 0)
+        .then(|| VtkSeries::create(out, "simulation", "vtk"))
+        .transpose()?;
+    if let Some(series) = vtk.as_mut() {
+        write_vtk_frame(series, 0, &history[0], sim.params().dt, d)?;
+    }
 
     let bar = crate::progress::step_bar(steps, options.progress);
 
@@ -196,6 +209,11 @@ pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> 
         summary.steps = step + 1;
         summary.particles = particles.len();
         history.push(record(&particles));
+        if let Some(series) = vtk.as_mut()
+            && (step + 1) % options.vtk_every == 0
+        {
+            write_vtk_frame(series, step + 1, &history[step + 1], sim.params().dt, d)?;
+        }
         if options.frame_every > 0 && (step + 1) % options.frame_every == 0 {
             render(
                 step + 1,
@@ -257,6 +275,28 @@ struct Frame {
     positions: Vec<f32>,
     velocities: Vec<f32>,
     affine: Option<Vec<f32>>,
+}
+
+/// Frame `step` of the run as a VTK file of the series (all particles liquid).
+fn write_vtk_frame(
+    series: &mut VtkSeries,
+    step: usize,
+    frame: &Frame,
+    dt: f32,
+    d: usize,
+) -> Result<()> {
+    let types = vec![i32::from(KIND_LIQUID); frame.positions.len() / d];
+    series.add(
+        step,
+        &VtkFrame {
+            time: f64::from(step as f32 * dt),
+            dim: d,
+            positions: &frame.positions,
+            velocities: &frame.velocities,
+            particle_type: &types,
+        },
+    )?;
+    Ok(())
 }
 
 /// The trajectory so far as `trajectory.npz` (see the module docs).

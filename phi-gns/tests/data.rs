@@ -4,6 +4,8 @@
 mod common;
 #[path = "data/dataset.rs"]
 mod dataset;
+#[path = "data/export.rs"]
+mod export;
 #[path = "data/stats.rs"]
 mod stats;
 #[path = "data/tfrecord.rs"]

@@ -1,4 +1,5 @@
-//! Files for phi: NumPy `.npy` arrays ([`npy`]), `.npz` archives of them ([`npz`]), the atomic
+//! Files for phi: NumPy `.npy` arrays ([`npy`]), `.npz` archives of them ([`npz`]), object arrays
+//! of numeric arrays as numpy pickles them ([`pickle`]), the atomic
 //! writing they share ([`write_atomic`]), and TOML files read with errors that name the key
 //! ([`parse_toml`]).
 //!
@@ -16,6 +17,7 @@ mod atomic;
 mod error;
 pub mod npy;
 pub mod npz;
+pub mod pickle;
 mod toml_file;
 
 pub use atomic::{

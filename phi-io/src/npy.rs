@@ -221,7 +221,13 @@ const NPY_MAGIC: &[u8; 6] = b"\x93NUMPY";
 
 /// The `.npy` header (magic, version, length and the padded dictionary) for `array`.
 pub(crate) fn npy_header(array: &NpyArray) -> Vec<u8> {
-    let shape = match array.shape.as_slice() {
+    npy_header_for(array.data.descr(), &array.shape)
+}
+
+/// The `.npy` header for an array of type descriptor `descr` (e.g. `"<f4"`, or `"|O"` for an
+/// array of Python objects) and shape `shape`.
+pub(crate) fn npy_header_for(descr: &str, shape: &[usize]) -> Vec<u8> {
+    let shape = match shape {
         [] => "()".to_string(),
         [n] => format!("({n},)"),
         dims => {
@@ -229,10 +235,7 @@ pub(crate) fn npy_header(array: &NpyArray) -> Vec<u8> {
             format!("({})", dims.join(", "))
         }
     };
-    let dict = format!(
-        "{{'descr': '{}', 'fortran_order': False, 'shape': {shape}, }}",
-        array.data.descr()
-    );
+    let dict = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
     // Version 1.0 stores the header length in 2 bytes; longer headers (shapes with thousands of
     // axes) need version 2.0 and its 4-byte length.
     let padded = |prefix: usize| (prefix + dict.len() + 1).div_ceil(64) * 64;

@@ -2,11 +2,12 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::{Args, Subcommand};
 use phi_flip::{RandomSceneParams, SceneVariant};
 
 use super::Split;
+use super::export::{ExportFormat, ExportOptions, export};
 use super::generate::{GenerateOptions, generate};
 use super::manifest::Shard;
 use super::merge::merge;
@@ -46,13 +47,13 @@ pub enum DatasetCommand {
         #[arg(long, default_value_t = 25)]
         print_every: usize,
     },
-    /// Write a dataset in another format: `npz` (one archive per split holding
-    /// `trajectory_{i}_position` and `trajectory_{i}_particle_type`, for numpy) or `tfrecord`
-    /// (DeepMind learning_to_simulate's `{split}.tfrecord` files and metadata.json).
+    /// Write a dataset in another format: `npz` (one archive per split, for numpy),
+    /// `tfrecord` (DeepMind learning_to_simulate), `gns` (geoelements/gns) or `lagrangebench`
+    /// (LagrangeBench's HDF5, written through Python's h5py). docs/datasets.md describes each.
     Export {
         /// The dataset directory.
         dir: PathBuf,
-        /// `npz` or `tfrecord`.
+        /// The format to write.
         #[arg(long)]
         format: ExportFormat,
         /// The directory to write into (absent or empty, unless --force).
@@ -61,6 +62,9 @@ pub enum DatasetCommand {
         /// Replace the content of a non-empty --out.
         #[arg(long)]
         force: bool,
+        /// The Python interpreter, with numpy and h5py, for `--format lagrangebench`.
+        #[arg(long, default_value = "python3")]
+        python: PathBuf,
     },
     /// Read DeepMind learning_to_simulate's TFRecord files (`{split}.tfrecord` and
     /// metadata.json) into a phi dataset directory.
@@ -76,13 +80,17 @@ pub enum DatasetCommand {
     },
 }
 
-/// Formats of `phi dataset export`.
+/// `phi dataset generate --split`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum ExportFormat {
-    /// One `.npz` per split.
-    Npz,
-    /// DeepMind's TFRecord files.
-    Tfrecord,
+pub enum SplitChoice {
+    /// Random scenes for training.
+    Train,
+    /// Random scenes from another seed.
+    Valid,
+    /// The hand-made test scenes.
+    Test,
+    /// Train, valid and test.
+    All,
 }
 
 /// `phi dataset generate`.
@@ -91,9 +99,9 @@ pub struct GenerateArgs {
     /// The dataset directory.
     #[arg(long)]
     pub out: PathBuf,
-    /// `train`, `valid`, `test` or `all`.
-    #[arg(long, default_value = "all")]
-    pub split: String,
+    /// The split to make.
+    #[arg(long, value_enum, default_value_t = SplitChoice::All)]
+    pub split: SplitChoice,
     /// Trajectories per split (default: train 2000, valid 20, test 10; test has at most 10).
     #[arg(long)]
     pub count: Option<usize>,
@@ -112,8 +120,8 @@ pub struct GenerateArgs {
     /// Worker threads (default: one per core).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Make only the trajectories `i` with `i mod n = k`.
-    #[arg(long, default_value = "0/1")]
+    /// Make only the trajectories `i` with `i mod n = k` (0 <= k < n).
+    #[arg(long, default_value = "0/1", value_name = "K/N")]
     pub shard: Shard,
     /// Continue in a directory whose generator.json differs or is missing.
     #[arg(long)]
@@ -201,8 +209,8 @@ pub fn run(command: DatasetCommand) -> Result<()> {
             format,
             out,
             force,
+            python,
         } => {
-            let dataset = phi_gns::data::Dataset::open(&dir)?;
             if let (Ok(data), Ok(target)) = (dir.canonicalize(), out.canonicalize())
                 && data.starts_with(&target)
             {
@@ -212,33 +220,32 @@ pub fn run(command: DatasetCommand) -> Result<()> {
                 );
             }
             let staging = prepare_output(&out, force)?;
-            let written = (|| -> Result<Vec<String>> {
-                let mut lines = Vec::new();
-                match format {
-                    ExportFormat::Npz => {
-                        for split in dataset.metadata().splits.keys() {
-                            let file = staging.join(format!("{split}.npz"));
-                            let count = phi_gns::data::export_npz(&dataset, split, &file)?;
-                            lines.push(format!(
-                                "{split}: {count} trajectories -> {}",
-                                out.join(format!("{split}.npz")).display()
-                            ));
-                        }
-                    }
-                    ExportFormat::Tfrecord => {
-                        phi_gns::data::tfrecord::export_tfrecord(&dataset, &staging)?;
-                        lines.push(format!(
-                            "wrote {}/{{split}}.tfrecord and metadata.json",
-                            out.display()
-                        ));
-                    }
-                }
+            let written = export(&ExportOptions {
+                dir,
+                format,
+                out: staging.clone(),
+                python,
+                progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
+            })
+            .and_then(|counts| {
                 phi_io::publish_dir(&staging, &out)?;
-                Ok(lines)
-            })();
-            let lines = discard_on_error(written, &staging)?;
-            for line in lines {
-                println!("{line}");
+                Ok(counts)
+            });
+            let counts = discard_on_error(written, &staging)?;
+            for (split, count) in counts {
+                let file = match format {
+                    ExportFormat::Npz | ExportFormat::Gns => format!("{split}.npz"),
+                    ExportFormat::Tfrecord => format!("{split}.tfrecord"),
+                    ExportFormat::Lagrangebench => format!("{split}.h5"),
+                };
+                println!(
+                    "{split}: {} -> {}",
+                    trajectories(count),
+                    out.join(file).display()
+                );
+            }
+            if format != ExportFormat::Npz {
+                println!("wrote {}", out.join("metadata.json").display());
             }
             Ok(())
         }
@@ -301,13 +308,11 @@ fn discard_on_error<T>(result: Result<T>, staging: &std::path::Path) -> Result<T
 }
 
 fn run_generate(args: GenerateArgs) -> Result<()> {
-    let splits = match args.split.as_str() {
-        "all" => Split::ALL.to_vec(),
-        s => vec![
-            s.parse::<Split>()
-                .map_err(anyhow::Error::msg)
-                .context("--split")?,
-        ],
+    let splits = match args.split {
+        SplitChoice::All => Split::ALL.to_vec(),
+        SplitChoice::Train => vec![Split::Train],
+        SplitChoice::Valid => vec![Split::Valid],
+        SplitChoice::Test => vec![Split::Test],
     };
     let mut params = match &args.config {
         Some(path) => RandomSceneParams::from_file(path)?,
@@ -345,9 +350,9 @@ fn run_generate(args: GenerateArgs) -> Result<()> {
         ));
     }
     println!(
-        "{}: wrote {} trajectories ({}..{} particles), kept {} finished{repaired}, in {:.1} s{}",
+        "{}: wrote {} ({}..{} particles), kept {} finished{repaired}, in {:.1} s{}",
         options.out.display(),
-        summary.written,
+        trajectories(summary.written),
         summary.particles.0,
         summary.particles.1,
         summary.skipped,
@@ -380,4 +385,13 @@ pub fn render(args: RenderArgs) -> Result<()> {
     )?;
     println!("wrote {} ({pictures} pictures)", args.out.display());
     Ok(())
+}
+
+/// "1 trajectory", "2 trajectories".
+pub fn trajectories(count: usize) -> String {
+    if count == 1 {
+        "1 trajectory".to_string()
+    } else {
+        format!("{count} trajectories")
+    }
 }

@@ -5,13 +5,16 @@
 //!   trajectories, resumable and shardable;
 //! - [`merge`]: joins shard directories into one dataset;
 //! - [`stats`]: particle counts and the neighbour-count distribution over time (thesis fig. 5.4);
-//! - [`render`]: a GIF of one trajectory.
+//! - [`render`]: a GIF of one trajectory;
+//! - [`export`]: the dataset for numpy, DeepMind's TFRecord reader, geoelements/gns and
+//!   LagrangeBench.
 //!
 //! The files are those of [`phi_gns::data`]: `DIR/metadata.json` and
 //! `DIR/{train,valid,test}/traj_NNNNN.npz`. `docs/datasets.md` describes the format and the
 //! commands.
 
 pub mod cli;
+pub mod export;
 pub mod generate;
 pub mod manifest;
 pub mod memory;

@@ -13,6 +13,8 @@
 //!   checkpoint, and last.
 //! - `rollout.gif`: the truth (left) and the prediction (right) of the start frame and of every
 //!   `frame_every`-th step, drawn as `phi render` draws a dataset (2D datasets only).
+//! - with `--vtk-every N`: `rollout.pvd` and `truth.pvd`, VTK series of the prediction and the
+//!   truth (the start frame and every `N`-th step; frames in `vtk/`), for ParaView.
 //!
 //! A prediction with a NaN or infinite position stops the trajectory's rollout: the frames
 //! before it are written, `rollout.json` says `"complete": false` with the reason (step, frame
@@ -33,6 +35,7 @@ use serde::{Deserialize, Serialize};
 use super::is_temporary_of;
 use crate::backends::BackendKind;
 use crate::dataset::render::DatasetRenderer;
+use crate::output::vtk::{VtkFrame, VtkSeries};
 use crate::output::{
     ArrayData, FrameStyle, GifWriter, NpyArray, OutputError, RgbImage, side_by_side, write_atomic,
     write_npz,
@@ -50,6 +53,9 @@ pub const POSITIONS_FILE: &str = "rollout.npz";
 pub const GIF_FILE: &str = "rollout.gif";
 /// [`RolloutRecord::reason`] while the rollout runs (what a killed run leaves).
 pub const RUNNING: &str = "not finished: the rollout is running or was interrupted";
+
+/// The VTK series of the prediction, of the truth, and their folder.
+pub const VTK_FILES: [&str; 3] = ["rollout.pvd", "truth.pvd", "vtk"];
 
 /// Columns of background between the truth and the prediction in the GIF.
 const GIF_GAP: u32 = 6;
@@ -97,6 +103,10 @@ pub struct RolloutArgs {
     /// Print the MSE of every frame (default: the first, quartile and last steps).
     #[arg(long)]
     pub verbose: bool,
+    /// Write the prediction and the truth as VTK frames every this many steps, for ParaView:
+    /// `rollout.pvd` and `truth.pvd`, frames in `vtk/` (0: none).
+    #[arg(long, default_value_t = 0)]
+    pub vtk_every: usize,
 }
 
 /// `rollout.json`: one trajectory's rollout.
@@ -267,7 +277,14 @@ pub fn check_rollout_dir(dir: &Path) -> Result<()> {
     if !dir.is_dir() {
         bail!("{} exists and is not a directory", dir.display());
     }
-    let ours = [RECORD_FILE, POSITIONS_FILE, GIF_FILE];
+    let ours = [
+        RECORD_FILE,
+        POSITIONS_FILE,
+        GIF_FILE,
+        VTK_FILES[0],
+        VTK_FILES[1],
+        VTK_FILES[2],
+    ];
     let mut any = false;
     for entry in std::fs::read_dir(dir).with_context(|| format!("reading {}", dir.display()))? {
         let name = entry
@@ -401,13 +418,31 @@ fn roll_one<B: GnsKernels>(
     };
     // The record first: it marks the folder as ours. Files of an earlier run go.
     write_record(dir, &record)?;
-    for stale in [POSITIONS_FILE, GIF_FILE] {
+    for stale in [
+        POSITIONS_FILE,
+        GIF_FILE,
+        VTK_FILES[0],
+        VTK_FILES[1],
+        VTK_FILES[2],
+    ] {
         let path = dir.join(stale);
-        match std::fs::remove_file(&path) {
+        let removed = if path.is_dir() {
+            std::fs::remove_dir_all(&path)
+        } else {
+            std::fs::remove_file(&path)
+        };
+        match removed {
             Ok(()) => {}
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
             Err(e) => return Err(e).with_context(|| format!("removing {}", path.display())),
         }
+    }
+    let mut vtk = (args.vtk_every > 0)
+        .then(|| RolloutVtk::create(dir, plan.dataset.metadata().dt, &trajectory))
+        .transpose()?;
+    if let Some(vtk) = vtk.as_mut() {
+        let first = trajectory.frame(range.start);
+        vtk.add(range.start, first, first, first, first)?;
     }
 
     let renderer = if args.frame_every > 0 && dim == 2 {
@@ -453,6 +488,18 @@ fn roll_one<B: GnsKernels>(
                 .mse
                 .push(position_mse(positions, truth, &kinematic, dim));
             record.steps = step;
+            if let Some(vtk) = vtk.as_mut()
+                && step % args.vtk_every == 0
+            {
+                let before = step - 1;
+                let previous = if before == 0 {
+                    trajectory.frame(range.start)
+                } else {
+                    &predicted[(before - 1) * n * dim..before * n * dim]
+                };
+                let truth_before = trajectory.frame(range.start + before);
+                vtk.add(range.start + step, positions, previous, truth, truth_before)?;
+            }
             if let (Some(renderer), Some(writer)) = (&renderer, gif.as_mut())
                 && step % args.frame_every == 0
             {
@@ -512,6 +559,66 @@ fn roll_one<B: GnsKernels>(
     record.wall_seconds = elapsed;
     write_record(dir, &record)?;
     Ok(record)
+}
+
+/// The VTK series of a rollout: the prediction (`rollout.pvd`) and the truth (`truth.pvd`),
+/// frames `vtk/predicted_NNNNN.vtu` and `vtk/truth_NNNNN.vtu` (`NNNNN` the dataset frame),
+/// positions in stored units, velocity the backward difference over `dt` (stored units per
+/// second), `particle_type` the dataset's (0 obstacle, 1 liquid).
+struct RolloutVtk {
+    predicted: VtkSeries,
+    truth: VtkSeries,
+    dt: f64,
+    dim: usize,
+    types: Vec<i32>,
+}
+
+impl RolloutVtk {
+    fn create(dir: &Path, dt: f64, trajectory: &Trajectory) -> Result<Self> {
+        Ok(RolloutVtk {
+            predicted: VtkSeries::create(dir, "rollout", "vtk")?.with_prefix("predicted"),
+            truth: VtkSeries::create(dir, "truth", "vtk")?.with_prefix("truth"),
+            dt,
+            dim: trajectory.dim,
+            types: trajectory
+                .particle_type
+                .iter()
+                .map(|&t| i32::try_from(t).unwrap_or(i32::MAX))
+                .collect(),
+        })
+    }
+
+    /// Frame `frame`: the predicted and true positions and those of the frame before.
+    fn add(
+        &mut self,
+        frame: usize,
+        predicted: &[f32],
+        predicted_before: &[f32],
+        truth: &[f32],
+        truth_before: &[f32],
+    ) -> Result<()> {
+        let time = frame as f64 * self.dt;
+        let dt = self.dt as f32;
+        let velocity = |now: &[f32], before: &[f32]| -> Vec<f32> {
+            now.iter().zip(before).map(|(a, b)| (a - b) / dt).collect()
+        };
+        for (series, now, before) in [
+            (&mut self.predicted, predicted, predicted_before),
+            (&mut self.truth, truth, truth_before),
+        ] {
+            series.add(
+                frame,
+                &VtkFrame {
+                    time,
+                    dim: self.dim,
+                    positions: now,
+                    velocities: &velocity(now, before),
+                    particle_type: &self.types,
+                },
+            )?;
+        }
+        Ok(())
+    }
 }
 
 /// A progress bar of `steps` steps on stderr when it is a terminal, else a hidden one.

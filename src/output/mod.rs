@@ -4,7 +4,9 @@
 //!   [`read_npz`]), so that trajectories can be exchanged with Python tooling; it lives in
 //!   [`phi_io::npz`] (so that the library crates can use it) and is re-exported here;
 //! - [`render`]: drawing particle frames ([`render_frame`]) and saving them as PNG pictures
-//!   ([`write_png`]) or streamed animated GIFs ([`GifWriter`]).
+//!   ([`write_png`]) or streamed animated GIFs ([`GifWriter`]);
+//! - [`vtk`]: particle frames as VTK `.vtu` files and a `.pvd` series for ParaView
+//!   ([`vtk::VtkSeries`]).
 //!
 //! Every fallible function returns [`OutputError`]; errors about a file name it.
 //! Files that are written in one go ([`write_npz`], [`write_npy`], [`write_png`]) are written
@@ -13,6 +15,7 @@
 //! readers never see a half-written file.
 
 pub mod render;
+pub mod vtk;
 
 /// NumPy `.npy` arrays and `.npz` archives: [`phi_io::npz`], re-exported.
 pub mod npz {

@@ -1,5 +1,6 @@
 //! FLIP datasets for Graph Network-based Simulators (thesis section 5.2): the on-disk format, its
-//! statistics, and conversion to and from DeepMind's `learning_to_simulate` TFRecords.
+//! statistics, conversion to and from DeepMind's `learning_to_simulate` TFRecords, and exports
+//! for geoelements/gns and LagrangeBench ([`export`]).
 //!
 //! # Layout
 //!
@@ -71,6 +72,7 @@
 //! ```
 
 mod dataset;
+pub mod export;
 mod metadata;
 mod stats;
 pub mod tfrecord;

@@ -17,7 +17,8 @@
 //! Each record's data is one `tf.train.SequenceExample` (protobuf, encoded by hand here), as
 //! `learning_to_simulate/reading_utils.py` parses it:
 //!
-//! - context feature `key`: `int64_list` holding the trajectory's index;
+//! - context feature `key`: `int64_list` holding the trajectory's index (on import any value is
+//!   accepted; keys other than 0, 1, ... are kept in the metadata);
 //! - context feature `particle_type`: `bytes_list` with one value, the raw little-endian bytes of
 //!   the `int64` types `[n]`;
 //! - context feature `seed`: `int64_list`, the generator's seed (ours; DeepMind's parser ignores
@@ -474,6 +475,26 @@ pub fn decode_sequence_example(
     path: &Path,
     record: u64,
 ) -> Result<Trajectory, DataError> {
+    let (mut traj, key) = decode_record(bytes, dim, index, path, record)?;
+    if let Some(k) = key {
+        traj.index = usize::try_from(k).map_err(|_| DataError::Record {
+            path: path.to_path_buf(),
+            record,
+            reason: format!("'key' is negative ({k})"),
+        })?;
+    }
+    Ok(traj)
+}
+
+/// Decodes one record into a trajectory with index `index` and the value of its `key` context
+/// feature, if it has one (any value: DeepMind's reader ignores it).
+pub fn decode_record(
+    bytes: &[u8],
+    dim: usize,
+    index: usize,
+    path: &Path,
+    record: u64,
+) -> Result<(Trajectory, Option<i64>), DataError> {
     let error = |reason: String| DataError::Record {
         path: path.to_path_buf(),
         record,
@@ -550,11 +571,9 @@ pub fn decode_sequence_example(
         .flat_map(|f| f.chunks_exact(4))
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
         .collect();
-    let index = match key {
-        Some(k) => usize::try_from(k).map_err(|_| error(format!("'key' is negative ({k})")))?,
-        None => index,
-    };
-    Trajectory::new(dim, position, particle_type, seed, index).map_err(|e| error(e.to_string()))
+    let traj = Trajectory::new(dim, position, particle_type, seed, index)
+        .map_err(|e| error(e.to_string()))?;
+    Ok((traj, key))
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -632,12 +651,27 @@ fn read_tfrecord_metadata(dir: &Path) -> Result<(Metadata, bool), DataError> {
     Ok((metadata, false))
 }
 
+/// Records the `key` features of splits whose keys are not their record numbers as
+/// `generator.tfrecord_keys.{split}` (a list, `null` for a record without a key), keeping the
+/// rest of `generator` (an earlier value that is not an object goes to `generator.previous`).
+fn keep_foreign_keys(metadata: &mut Metadata, keys: serde_json::Map<String, serde_json::Value>) {
+    let mut generator = match std::mem::take(&mut metadata.generator) {
+        serde_json::Value::Object(map) => map,
+        serde_json::Value::Null => serde_json::Map::new(),
+        other => serde_json::Map::from_iter([("previous".to_string(), other)]),
+    };
+    generator.insert("tfrecord_keys".into(), serde_json::Value::Object(keys));
+    metadata.generator = serde_json::Value::Object(generator);
+}
+
 /// Imports the TFRecord directory `in_dir` (`metadata.json` and `{split}.tfrecord` files,
 /// written by [`export_tfrecord`] or by DeepMind) as a dataset in `out_dir`, and opens it.
 ///
 /// With our metadata the splits it lists are read; with DeepMind's, whichever of
 /// `train`, `valid` and `test` have a file. Trajectory `i` of a split is record `i`; each gets
-/// its statistics computed from its positions. Every record must have `sequence_length + 1`
+/// its statistics computed from its positions. The `key` feature is not needed and may hold any
+/// value, as in DeepMind's reader, which ignores it; keys other than 0, 1, ... are kept in the
+/// metadata as `generator.tfrecord_keys.{split}`. Every record must have `sequence_length + 1`
 /// frames; a damaged, truncated or malformed record is a [`DataError::Record`] naming the file
 /// and the record's number.
 ///
@@ -663,6 +697,7 @@ pub fn import_tfrecord(in_dir: &Path, out_dir: &Path) -> Result<Dataset, DataErr
             .map(|s| s.to_string())
             .collect()
     };
+    let mut foreign_keys = serde_json::Map::new();
     for split in &splits {
         let path = tfrecord_path(in_dir, split);
         let split_dir = out_dir.join(split);
@@ -670,12 +705,14 @@ pub fn import_tfrecord(in_dir: &Path, out_dir: &Path) -> Result<Dataset, DataErr
             .map_err(|e| DataError::io(&split_dir, "cannot create the directory", e))?;
         let mut records = RecordReader::open(&path)?;
         let mut count = 0;
+        let mut keys = Vec::new();
         loop {
             let record = records.record_number();
             let Some(data) = records.next_record()? else {
                 break;
             };
-            let traj = decode_sequence_example(&data, metadata.dim, count, &path, record)?;
+            let (traj, key) = decode_record(&data, metadata.dim, count, &path, record)?;
+            keys.push(key);
             let bad = |reason: String| DataError::Record {
                 path: path.clone(),
                 record,
@@ -687,12 +724,6 @@ pub fn import_tfrecord(in_dir: &Path, out_dir: &Path) -> Result<Dataset, DataErr
                     traj.frames,
                     metadata.sequence_length,
                     metadata.frames()
-                )));
-            }
-            if traj.index != count {
-                return Err(bad(format!(
-                    "key {} in record {count} (records must be in key order 0, 1, ...)",
-                    traj.index
                 )));
             }
             let stats = TrajectoryStats::of(&traj);
@@ -714,6 +745,16 @@ pub fn import_tfrecord(in_dir: &Path, out_dir: &Path) -> Result<Dataset, DataErr
             ));
         }
         metadata.splits.insert(split.clone(), count);
+        let in_order = keys
+            .iter()
+            .enumerate()
+            .all(|(i, k)| *k == Some(i as i64) || k.is_none());
+        if !in_order {
+            foreign_keys.insert(split.clone(), serde_json::json!(keys));
+        }
+    }
+    if !foreign_keys.is_empty() {
+        keep_foreign_keys(&mut metadata, foreign_keys);
     }
     write_metadata(out_dir, &metadata)?;
     Dataset::open(out_dir)

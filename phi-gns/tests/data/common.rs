@@ -94,11 +94,13 @@ pub fn write_sample_dataset(
     all
 }
 
-/// A Python interpreter with numpy, if there is one.
+/// A Python interpreter with numpy, if there is one: `$PHI_PYTHON` first, then the usual
+/// places.
 pub fn python_with_numpy() -> Option<PathBuf> {
-    ["/work/phiflow-venv/bin/python", "python3"]
-        .into_iter()
+    std::env::var_os("PHI_PYTHON")
         .map(PathBuf::from)
+        .into_iter()
+        .chain(["/work/phiflow-venv/bin/python", "python3"].map(PathBuf::from))
         .find(|python| {
             Command::new(python)
                 .args(["-c", "import numpy"])

@@ -183,6 +183,15 @@ impl NpzReader {
         self.read_index(index)
     }
 
+    /// The `.npy` bytes of the entry `name` as they are (header and data), its CRC-32 checked:
+    /// for entries [`NpzReader::read`] does not decode, such as object arrays.
+    ///
+    /// Fails with [`IoError::MissingArray`] when there is no such array.
+    pub fn read_npy_bytes(&mut self, name: &str) -> Result<Vec<u8>, IoError> {
+        let index = self.index_of(name)?;
+        self.entry_bytes(index)
+    }
+
     /// Reads the `index`-th array in archive order.
     fn read_index(&mut self, index: usize) -> Result<NpyArray, IoError> {
         let bytes = self.entry_bytes(index)?;

@@ -10,6 +10,7 @@ use zip::write::FileOptions;
 use zip::{CompressionMethod, DateTime, ZipWriter};
 
 use crate::npy::{NpyArray, npy_header};
+use crate::pickle::object_array_npy;
 use crate::{IoError, write_all, write_atomic};
 
 /// Where an archive is written: the zip crate seeks back to fill in each entry's CRC-32 and sizes
@@ -91,6 +92,30 @@ impl<'a> NpzWriter<'a> {
             .for_each_le_chunk(|chunk| write_all(&mut self.zip, chunk, path))
     }
 
+    /// Appends a one-dimensional array of Python objects holding the numeric arrays `items` as
+    /// the entry `name.npy` (see [`crate::pickle`]); `numpy.load(path, allow_pickle=True)[name]`
+    /// gives an object array of `len(items)` numpy arrays.
+    ///
+    /// Fails as [`NpzWriter::add`] does, and as [`crate::pickle::object_array_npy`] does.
+    pub fn add_object_array(&mut self, name: &str, items: &[&NpyArray]) -> Result<(), IoError> {
+        let path = self.path;
+        let bytes = object_array_npy(items).map_err(|e| {
+            IoError::InvalidInput(format!("'{}': array '{name}': {e}", path.display()))
+        })?;
+        check_name(name, path)?;
+        if !self.names.insert(name.to_string()) {
+            return Err(IoError::InvalidInput(format!(
+                "'{}': array name '{name}' appears twice",
+                path.display()
+            )));
+        }
+        let zip64 = self.force_zip64 || bytes.len() as u64 >= ZIP64_ENTRY_SIZE;
+        self.zip
+            .start_file(format!("{name}.npy"), entry_options(zip64))
+            .map_err(|e| write_error(path, e))?;
+        write_all(&mut self.zip, &bytes, path)
+    }
+
     /// Writes the central directory and the end records (ZIP64 ones past 4 GiB or 65,535
     /// entries).
     pub(crate) fn finish(mut self) -> Result<(), IoError> {
@@ -131,8 +156,8 @@ pub fn write_npz_streamed<E: From<IoError>>(
     })
 }
 
-/// Checks one array and its name before it is written.
-fn check_entry(name: &str, array: &NpyArray, path: &Path) -> Result<(), IoError> {
+/// Checks an entry's name: not empty, not too long for a ZIP entry.
+fn check_name(name: &str, path: &Path) -> Result<(), IoError> {
     let bad = |why: &str| {
         IoError::InvalidInput(format!("'{}': array name '{name}' {why}", path.display()))
     };
@@ -142,6 +167,12 @@ fn check_entry(name: &str, array: &NpyArray, path: &Path) -> Result<(), IoError>
     if name.len() + 4 > usize::from(u16::MAX) {
         return Err(bad("is too long"));
     }
+    Ok(())
+}
+
+/// Checks one array and its name before it is written.
+fn check_entry(name: &str, array: &NpyArray, path: &Path) -> Result<(), IoError> {
+    check_name(name, path)?;
     array
         .validate()
         .map_err(|e| IoError::InvalidInput(format!("'{}': array '{name}': {e}", path.display())))
