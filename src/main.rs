@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use phi::demo::{self, DemoReport};
 use phi::phi_flip::Scene;
-use phi::simulate::{SimulateOptions, check_out_dir, simulate};
+use phi::simulate::{SimulateOptions, simulate};
 use phi::{with_autodiff_backend, with_backend};
 
 #[derive(Parser)]
@@ -56,6 +56,13 @@ enum Command {
         /// Rewrite the trajectory file every this many steps, so a killed run keeps them.
         #[arg(long, default_value_t = 25)]
         checkpoint_every: usize,
+        /// Replace a previous run in --out (never anything else).
+        #[arg(long)]
+        force: bool,
+        /// Refuse scenes estimated to need more memory than this (e.g. 8GiB; default: the
+        /// machine's memory).
+        #[arg(long, value_parser = phi::memory::parse_bytes)]
+        memory_limit: Option<u64>,
     },
     /// Generate, merge and inspect FLIP datasets (thesis section 5.2).
     Dataset {
@@ -115,6 +122,8 @@ fn main() -> Result<()> {
             frame_every,
             pixels_per_cell,
             checkpoint_every,
+            force,
+            memory_limit,
         } => run_simulate(
             SimulateOptions {
                 scene,
@@ -124,6 +133,8 @@ fn main() -> Result<()> {
                 pixels_per_cell,
                 steps,
                 progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
+                force,
+                memory_limit,
             },
             backend,
             device,
@@ -159,7 +170,6 @@ fn run_simulate(
              CPU only (use --device cpu)"
         );
     }
-    check_out_dir(&options.out)?;
     println!(
         "{}: {}",
         options.scene.display(),
@@ -168,7 +178,8 @@ fn run_simulate(
     let summary = with_backend!(kind, B => simulate::<B>(&scene, &options))?;
     println!(
         "{} steps of {} particles on {} in {:.2} s: {:.1} steps/s ({:.3} ms/step); pressure solve: \
-         {:.1} iterations on average, {} at most; largest step {:.2} cells",
+         {:.1} iterations on average, {} at most; largest step {:.2} cells, CFL number {:.2} at \
+         most ({} sub-steps)",
         summary.steps,
         summary.particles,
         summary.backend,
@@ -178,6 +189,8 @@ fn run_simulate(
         summary.solver_iterations_mean,
         summary.solver_iterations_max,
         summary.max_displacement_cells,
+        summary.cfl_max,
+        summary.substeps,
     );
     println!(
         "wrote {}/trajectory.npz, run.json{}",

@@ -8,6 +8,7 @@ use phi::output::read_npz;
 
 mod dataset;
 mod eval;
+mod faults;
 mod optimize;
 mod rollout;
 mod train;
