@@ -10,6 +10,7 @@ pub mod backends;
 pub mod dataset;
 pub mod demo;
 pub mod gns;
+pub mod memory;
 pub mod optimize;
 pub mod output;
 pub mod progress;

@@ -9,7 +9,7 @@ use std::process::ExitCode;
 use phi::dataset::memory::shorten;
 use phi::demo::{self, DemoReport};
 use phi::phi_flip::Scene;
-use phi::simulate::{SimulateOptions, check_out_dir, simulate};
+use phi::simulate::{SimulateOptions, simulate};
 use phi::{with_autodiff_backend, with_backend};
 
 #[derive(Parser)]
@@ -68,6 +68,13 @@ enum Command {
         /// steps, for ParaView (0: none).
         #[arg(long, default_value_t = 0)]
         vtk_every: usize,
+        /// Replace a previous run in --out (never anything else).
+        #[arg(long)]
+        force: bool,
+        /// Refuse scenes estimated to need more memory than this (e.g. 8GiB; default: the
+        /// machine's memory).
+        #[arg(long, value_parser = phi::memory::parse_bytes)]
+        memory_limit: Option<u64>,
     },
     /// Generate, merge and inspect FLIP datasets (thesis section 5.2).
     Dataset {
@@ -179,6 +186,8 @@ fn run(command: Command) -> Result<()> {
             pixels_per_cell,
             checkpoint_every,
             vtk_every,
+            force,
+            memory_limit,
         } => run_simulate(
             SimulateOptions {
                 scene,
@@ -189,6 +198,8 @@ fn run(command: Command) -> Result<()> {
                 steps,
                 vtk_every,
                 progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
+                force,
+                memory_limit,
             },
             backend,
             device,
@@ -224,7 +235,6 @@ fn run_simulate(
              CPU only (use --device cpu)"
         );
     }
-    check_out_dir(&options.out)?;
     println!(
         "{}: {}",
         options.scene.display(),
@@ -233,7 +243,8 @@ fn run_simulate(
     let summary = with_backend!(kind, B => simulate::<B>(&scene, &options))?;
     println!(
         "{} steps of {} particles on {} in {:.2} s: {:.1} steps/s ({:.3} ms/step); pressure solve: \
-         {:.1} iterations on average, {} at most; largest step {:.2} cells",
+         {:.1} iterations on average, {} at most; largest step {:.2} cells, CFL number {:.2} at \
+         most ({} sub-steps)",
         summary.steps,
         summary.particles,
         summary.backend,
@@ -243,6 +254,8 @@ fn run_simulate(
         summary.solver_iterations_mean,
         summary.solver_iterations_max,
         summary.max_displacement_cells,
+        summary.cfl_max,
+        summary.substeps,
     );
     println!(
         "wrote {}/trajectory.npz, run.json{}{}",

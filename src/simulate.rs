@@ -9,11 +9,27 @@
 //!   `affine` `[T+1, N, d, d]` float32, each particle's affine velocity matrix (`[.., a, j]` =
 //!   `∂v_a/∂x_j`, per second; zero in frame 0).
 //! - `run.json`: the scene, the backend, and run facts; `"complete": false` until the last step
-//!   is written.
+//!   is written. Rewritten with the trajectory at every checkpoint.
 //! - `frames/frame_NNNNN.png` and `simulation.gif` (written frame by frame).
 //! - with `vtk_every > 0`: `vtk/frame_NNNNN.vtu` every `vtk_every` steps and `simulation.pvd`,
 //!   the series with its times, for ParaView (positions in cells, velocity in cells per second,
 //!   `particle_type` 1 = liquid).
+//!
+//! # When a run fails
+//! A step that fails (an unstable run: a CFL number above `simulation.max_cfl`, a non-finite
+//! state, a failed pressure solve) or an output error ends the run with an error, after the
+//! trajectory of the steps done so far is written, the GIF is closed and `run.json` records the
+//! steps and frames that exist, `"complete": false` and the reason (`"failure"`).
+//!
+//! # The output directory
+//! It must be missing or empty. `--force` replaces a previous run (a directory holding only what
+//! `phi simulate` writes: its files are removed first, so old and new frames never mix); a
+//! directory with anything else in it, a dataset above all, is refused even then.
+//!
+//! # Memory
+//! Before anything is allocated, the scene's needs are estimated ([`phi_flip::memory`], plus the
+//! recorded frames) and a run that needs more than the limit (`--memory-limit`, default the
+//! machine's memory) is refused, naming the key.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -51,6 +67,10 @@ pub struct SimulateOptions {
     pub vtk_every: usize,
     /// Show a progress bar.
     pub progress: bool,
+    /// Replace a previous run in `out`.
+    pub force: bool,
+    /// The most memory the run may need, bytes (`None`: the machine's memory).
+    pub memory_limit: Option<u64>,
 }
 
 /// What a run did.
@@ -76,8 +96,17 @@ pub struct RunSummary {
     pub max_displacement_cells: f32,
     /// Frames rendered.
     pub frames: usize,
+    /// Frames in `trajectory.npz` (the initial state and one per step done).
+    pub trajectory_frames: usize,
+    /// The largest CFL number of the run's (sub-)steps.
+    pub cfl_max: f32,
+    /// Sub-steps over all steps (equal to `steps` without `simulation.cfl`).
+    pub substeps: usize,
     /// Whether every step completed.
     pub complete: bool,
+    /// Why the run stopped early (only when it did).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub failure: Option<String>,
 }
 
 #[derive(Serialize)]
@@ -91,18 +120,41 @@ struct RunFile<'a> {
     summary: &'a RunSummary,
 }
 
+/// Bytes `phi simulate` holds per particle and recorded frame: positions and velocities (and
+/// APIC's matrices) in the history, again in the arrays of `trajectory.npz` and in its encoding.
+fn recorded_bytes_per_particle(d: usize, apic: bool) -> f64 {
+    let floats = 2 * d + if apic { d * d } else { 0 };
+    3.0 * 4.0 * floats as f64
+}
+
 /// Runs `scene` on backend `B` and writes everything to `options.out`.
 ///
 /// # Errors
-/// Scene errors, a failing step (non-finite state, solver failure) and I/O errors, with the path.
+/// Scene errors (a scene that needs more memory than the limit among them), an output directory
+/// that is not empty (see the module docs), a failing step (an unstable or non-finite state,
+/// a solver failure) and I/O errors, with the path. After a failing step, what the run made is
+/// written (see the module docs).
 pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> Result<RunSummary> {
     let origin = options.scene.display().to_string();
+    let steps = options.steps.unwrap_or(scene.simulation.steps);
+    let limit = match options.memory_limit {
+        Some(limit) => limit as f64,
+        None => crate::memory::machine_memory().map_or(f64::INFINITY, |m| m as f64),
+    };
+    let apic = scene.simulation.scheme == phi_flip::Scheme::Apic;
+    scene.check_memory(
+        &origin,
+        steps,
+        steps.saturating_add(1),
+        recorded_bytes_per_particle(scene.dim(), apic),
+        limit,
+    )?;
+    let out = &options.out;
+    prepare_out_dir(out, options.force)?;
     let device = B::default_device();
     let setup = scene.build::<B>(&origin, &device)?;
     let sim = setup.simulation;
-    let steps = options.steps.unwrap_or(setup.steps);
     let d = sim.domain().dim();
-    let out = &options.out;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let frames_dir = out.join("frames");
     if options.frame_every > 0 {
@@ -121,9 +173,14 @@ pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> 
         solver_residual_max: 0.0,
         max_displacement_cells: 0.0,
         frames: 0,
+        trajectory_frames: 0,
+        cfl_max: 0.0,
+        substeps: 0,
         complete: false,
+        failure: None,
     };
-    write_run_file(out, &origin, scene, sim.params().dt, d, &summary)?;
+    let dt = sim.params().dt;
+    write_run_file(out, &origin, scene, dt, d, &summary)?;
 
     let solid = sim.solid_cells(0.0)?;
     let style = FrameStyle {
@@ -133,7 +190,6 @@ pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> 
     let mut gif: Option<GifWriter> = None;
     let mut history: Vec<Frame> = Vec::with_capacity(steps + 1);
     let mut particles: Particles<B> = setup.particles;
-    let apic = sim.params().apic;
     let record = |p: &Particles<B>| Frame {
         positions: p.positions.to_vec(),
         velocities: p.velocities.to_vec(),
@@ -155,7 +211,7 @@ pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> 
                   gif: &mut Option<GifWriter>,
                   frames: &mut usize|
      -> Result<()> {
-        let time = step as f32 * sim.params().dt;
+        let time = step as f32 * dt;
         let solid_now = if sim.obstacles().iter().any(|o| o.is_moving()) {
             sim.solid_cells(time)?
         } else {
@@ -189,59 +245,181 @@ pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> 
         *frames += 1;
         Ok(())
     };
-    if options.frame_every > 0 {
-        render(0, &history[0].positions, &mut gif, &mut summary.frames)?;
-    }
 
-    for step in 0..steps {
-        let started = Instant::now();
-        let (next, stats) = sim
-            .step(&particles, step)
-            .with_context(|| format!("{origin}: the simulation failed"))?;
-        summary.simulation_seconds += started.elapsed().as_secs_f64();
-        particles = next;
-        iterations_total += stats.solve.iterations;
-        summary.solver_iterations_max = summary.solver_iterations_max.max(stats.solve.iterations);
-        summary.solver_residual_max = summary.solver_residual_max.max(stats.solve.residual);
-        summary.max_displacement_cells = summary
-            .max_displacement_cells
-            .max(stats.max_displacement_cells);
-        summary.steps = step + 1;
-        summary.particles = particles.len();
-        history.push(record(&particles));
-        if let Some(series) = vtk.as_mut()
-            && (step + 1) % options.vtk_every == 0
-        {
-            write_vtk_frame(series, step + 1, &history[step + 1], sim.params().dt, d)?;
+    let mut run = || -> Result<()> {
+        if options.frame_every > 0 {
+            render(0, &history[0].positions, &mut gif, &mut summary.frames)?;
         }
-        if options.frame_every > 0 && (step + 1) % options.frame_every == 0 {
-            render(
-                step + 1,
-                &history[step + 1].positions,
-                &mut gif,
-                &mut summary.frames,
-            )?;
+        for step in 0..steps {
+            let started = Instant::now();
+            let (next, stats) = sim
+                .step(&particles, step)
+                .with_context(|| format!("{origin}: the simulation failed"))?;
+            summary.simulation_seconds += started.elapsed().as_secs_f64();
+            particles = next;
+            iterations_total += stats.solve.iterations;
+            summary.solver_iterations_max =
+                summary.solver_iterations_max.max(stats.solve.iterations);
+            summary.solver_residual_max = summary.solver_residual_max.max(stats.solve.residual);
+            summary.max_displacement_cells = summary
+                .max_displacement_cells
+                .max(stats.max_displacement_cells);
+            summary.cfl_max = summary.cfl_max.max(stats.cfl);
+            summary.substeps += stats.substeps;
+            summary.steps = step + 1;
+            summary.particles = particles.len();
+            history.push(record(&particles));
+            if let Some(series) = vtk.as_mut()
+                && (step + 1) % options.vtk_every == 0
+            {
+                write_vtk_frame(series, step + 1, &history[step + 1], dt, d)?;
+            }
+            if options.frame_every > 0 && (step + 1) % options.frame_every == 0 {
+                render(
+                    step + 1,
+                    &history[step + 1].positions,
+                    &mut gif,
+                    &mut summary.frames,
+                )?;
+            }
+            if options.checkpoint_every > 0
+                && (step + 1) % options.checkpoint_every == 0
+                && step + 1 < steps
+            {
+                write_trajectory(out, &history, d, dt)?;
+                summary.trajectory_frames = history.len();
+                write_run_file(out, &origin, scene, dt, d, &summary)?;
+            }
+            bar.set_message(format!("{} particles", particles.len()));
+            bar.inc(1);
         }
-        if options.checkpoint_every > 0
-            && (step + 1) % options.checkpoint_every == 0
-            && step + 1 < steps
-        {
-            write_trajectory(out, &history, d, sim.params().dt)?;
-        }
-        bar.set_message(format!("{} particles", particles.len()));
-        bar.inc(1);
-    }
+        Ok(())
+    };
+    let outcome = run();
     bar.finish_and_clear();
 
-    summary.solver_iterations_mean = iterations_total as f64 / steps.max(1) as f64;
+    summary.solver_iterations_mean = iterations_total as f64 / summary.steps.max(1) as f64;
     summary.steps_per_second = summary.steps as f64 / summary.simulation_seconds.max(1e-12);
-    write_trajectory(out, &history, d, sim.params().dt)?;
-    if let Some(g) = gif {
-        g.finish()?;
+    // What exists is written whether or not the run succeeded; on success its errors count.
+    let trajectory = write_trajectory(out, &history, d, dt);
+    if trajectory.is_ok() {
+        summary.trajectory_frames = history.len();
     }
-    summary.complete = true;
-    write_run_file(out, &origin, scene, sim.params().dt, d, &summary)?;
-    Ok(summary)
+    let closed = gif.map_or(Ok(()), |g| g.finish().map_err(anyhow::Error::from));
+    match outcome {
+        Ok(()) => {
+            trajectory?;
+            closed?;
+            summary.complete = true;
+            write_run_file(out, &origin, scene, dt, d, &summary)?;
+            Ok(summary)
+        }
+        Err(error) => {
+            summary.failure = Some(format!("{error:#}"));
+            let kept = [
+                trajectory.err(),
+                closed.err(),
+                write_run_file(out, &origin, scene, dt, d, &summary).err(),
+            ];
+            for e in kept.into_iter().flatten() {
+                tracing::warn!("while keeping what the failed run made: {e:#}");
+            }
+            Err(error.context(format!(
+                "the run stopped after {} of {steps} steps; {} holds its {} frames \
+                 (run.json: \"complete\": false)",
+                summary.steps,
+                out.display(),
+                summary.trajectory_frames
+            )))
+        }
+    }
+}
+
+/// The names `phi simulate` writes in its output directory.
+const RUN_FILES: [&str; 3] = ["run.json", "trajectory.npz", "simulation.gif"];
+
+/// Whether `name` is one of the files `phi simulate` writes (temporary files of atomic writes
+/// included).
+fn is_run_file(name: &str) -> bool {
+    RUN_FILES.contains(&name)
+        || RUN_FILES
+            .iter()
+            .any(|f| name.starts_with(&format!(".{f}.tmp-")))
+}
+
+/// Makes sure `out` can take a run: missing or empty, or, with `force`, a previous run, whose
+/// files are removed.
+///
+/// # Errors
+/// A file where the directory should be; a non-empty directory without `force`; with `force`,
+/// one that holds anything `phi simulate` does not write (a dataset, other files).
+pub fn prepare_out_dir(out: &Path, force: bool) -> Result<()> {
+    check_out_dir(out)?;
+    if !out.exists() {
+        return Ok(());
+    }
+    let list = |dir: &Path| -> Result<Vec<String>> {
+        let mut names = Vec::new();
+        for entry in std::fs::read_dir(dir).with_context(|| format!("reading {}", dir.display()))? {
+            let entry = entry.with_context(|| format!("reading {}", dir.display()))?;
+            names.push(entry.file_name().to_string_lossy().into_owned());
+        }
+        names.sort();
+        Ok(names)
+    };
+    let names = list(out)?;
+    if names.is_empty() {
+        return Ok(());
+    }
+    let shown = names.iter().take(3).cloned().collect::<Vec<_>>().join(", ");
+    if names.iter().any(|n| n == "metadata.json") {
+        bail!(
+            "{} holds a dataset (metadata.json); phi simulate does not write into one: choose \
+             another --out",
+            out.display()
+        );
+    }
+    let frames_dir = out.join("frames");
+    let frames_are_ours = !frames_dir.exists()
+        || (frames_dir.is_dir()
+            && list(&frames_dir)?.iter().all(|n| {
+                (n.starts_with("frame_") && n.ends_with(".png")) || n.starts_with(".frame_")
+            }));
+    let foreign: Vec<&String> = names
+        .iter()
+        .filter(|n| !(is_run_file(n) || (n.as_str() == "frames" && frames_are_ours)))
+        .collect();
+    let previous_run = names.iter().any(|n| n == "run.json");
+    if !force {
+        bail!(
+            "{} is not empty ({} entries: {shown}{}){}",
+            out.display(),
+            names.len(),
+            if names.len() > 3 { ", ..." } else { "" },
+            if previous_run && foreign.is_empty() {
+                "; it holds a previous run: pass --force to replace it"
+            } else {
+                "; choose an empty or new --out"
+            }
+        );
+    }
+    if let Some(first) = foreign.first() {
+        bail!(
+            "{} holds files phi simulate does not write (e.g. {first}); --force replaces only a \
+             previous run: choose an empty or new --out",
+            out.display()
+        );
+    }
+    if frames_dir.exists() {
+        std::fs::remove_dir_all(&frames_dir)
+            .with_context(|| format!("removing the previous run's {}", frames_dir.display()))?;
+    }
+    for name in names.iter().filter(|n| is_run_file(n)) {
+        let path = out.join(name);
+        std::fs::remove_file(&path)
+            .with_context(|| format!("removing the previous run's {}", path.display()))?;
+    }
+    Ok(())
 }
 
 fn write_run_file(

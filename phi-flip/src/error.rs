@@ -39,6 +39,23 @@ pub enum FlipError {
         /// Which quantity.
         what: &'static str,
     },
+    /// The step went unstable: its CFL number (the most cells the fastest particle or grid
+    /// velocity crosses in one (sub-)step) exceeds the limit, or keeping it below the adaptive
+    /// target would take more sub-steps than allowed.
+    #[error(
+        "step {step}: the simulation is unstable: CFL number {cfl:.4} at dt = {dt} s {why}; use a \
+         smaller dt, or set simulation.cfl (e.g. 1.0) to sub-step adaptively"
+    )]
+    Unstable {
+        /// The step (0-based).
+        step: usize,
+        /// The CFL number `Δt · maxₐ maxᵢ |uₐ,ᵢ| / Δxₐ` over the particle and grid velocities.
+        cfl: f32,
+        /// The (sub-)step length it was measured or estimated for.
+        dt: f32,
+        /// What limit it broke, in words.
+        why: String,
+    },
     /// The pressure solve failed (did not converge, non-finite input, ...).
     #[error("step {step}: pressure solve: {source}")]
     Solve {

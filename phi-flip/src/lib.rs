@@ -4,6 +4,7 @@
 
 mod error;
 pub mod loss;
+pub mod memory;
 pub mod optimize;
 mod random;
 mod scene;
@@ -13,6 +14,7 @@ mod toml_file;
 
 pub use error::{FlipError, Result};
 pub use loss::Loss;
+pub use memory::MemoryEstimate;
 pub use optimize::{OptimizeConfig, OptimizeError, OptimizeOutcome, OptimizeProblem};
 pub use random::{
     BlockDraw, OBSTACLE_ATTEMPTS, ObstacleDraw, ParticleTrajectory, RandomScene, RandomSceneParams,
@@ -23,4 +25,7 @@ pub use scene::{
     SimulationSpec, SolverSpec, TransferSpec,
 };
 pub use seed::{Placement, seed_particles};
-pub use sim::{FlipParams, FlipSimulation, Inflow, Particles, SceneParameters, StepStats};
+pub use sim::{
+    DEFAULT_MAX_CFL, DEFAULT_MAX_SUBSTEPS, FlipParams, FlipSimulation, Inflow, Particles,
+    SceneParameters, StepStats,
+};

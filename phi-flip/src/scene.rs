@@ -17,6 +17,8 @@
 //! particles_per_cell = 8
 //! placement = "jittered"         # "jittered" | "centered"
 //! seed = 0
+//! cfl = 1.0                      # optional: sub-step so that the CFL number stays ≤ 1
+//! max_cfl = 20                   # a step above this CFL number stops the run (default 20)
 //!
 //! [solver]
 //! tolerance = 1e-5               # relative residual of the pressure solve
@@ -47,7 +49,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{FlipError, Result};
 use crate::seed::Placement;
-use crate::sim::{FlipParams, FlipSimulation, Inflow, Particles};
+use crate::sim::{
+    DEFAULT_MAX_CFL, DEFAULT_MAX_SUBSTEPS, FlipParams, FlipSimulation, Inflow, Particles,
+};
 
 /// A scene file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -162,6 +166,17 @@ pub struct SimulationSpec {
     /// Distance beyond an obstacle surface that pushed particles land at (default 0).
     #[serde(default)]
     pub push_offset: f32,
+    /// Adaptive sub-stepping: split each step into sub-steps whose CFL number stays at or
+    /// below this (e.g. `1.0`). Default: no sub-steps.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cfl: Option<f32>,
+    /// A (sub-)step whose CFL number exceeds this stops the run as unstable (default
+    /// [`DEFAULT_MAX_CFL`]; `inf` turns the check off).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_cfl: Option<f32>,
+    /// The most sub-steps one step may take with `cfl` (default [`DEFAULT_MAX_SUBSTEPS`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_substeps: Option<usize>,
 }
 
 fn default_ppc() -> usize {
@@ -376,6 +391,9 @@ impl Scene {
             TransferSpec::Nearest => Transfer::NearestFace,
         };
         params.push_offset = s.push_offset;
+        params.cfl = s.cfl;
+        params.max_cfl = s.max_cfl.unwrap_or(DEFAULT_MAX_CFL);
+        params.max_substeps = s.max_substeps.unwrap_or(DEFAULT_MAX_SUBSTEPS);
         let solver = &self.solver;
         let method = match solver.method.as_str() {
             "auto" => SolveMethod::Auto,
@@ -475,6 +493,52 @@ impl Scene {
                 format!("must be finite and not negative, got {}", s.push_offset),
             ));
         }
+        // A push beyond the domain's smallest extent throws every pushed particle out of the
+        // domain (to be clamped onto a wall): no meaningful scene asks for that.
+        let extent = (0..d)
+            .map(|a| domain.upper()[a] - domain.lower()[a])
+            .fold(f32::INFINITY, f32::min);
+        if s.push_offset >= extent {
+            return Err(error(
+                "simulation.push_offset".into(),
+                format!(
+                    "{} reaches across the whole domain (its smallest extent is {extent}); pushed \
+                     particles would land outside it. Use a fraction of a cell (Φ_Flow: 0.5)",
+                    s.push_offset
+                ),
+            ));
+        }
+        if let Some(c) = s.cfl
+            && !(c.is_finite() && c > 0.0)
+        {
+            return Err(error(
+                "simulation.cfl".into(),
+                format!("must be positive and finite, got {c}"),
+            ));
+        }
+        if let Some(c) = s.max_cfl
+            && !(c > 0.0)
+        {
+            return Err(error(
+                "simulation.max_cfl".into(),
+                format!("must be positive (inf turns the check off), got {c}"),
+            ));
+        }
+        let max = s.max_cfl.unwrap_or(DEFAULT_MAX_CFL);
+        if let Some(c) = s.cfl
+            && c > max
+        {
+            return Err(error(
+                "simulation.cfl".into(),
+                format!("the sub-step target {c} lies above simulation.max_cfl = {max}"),
+            ));
+        }
+        if s.max_substeps == Some(0) {
+            return Err(error(
+                "simulation.max_substeps".into(),
+                "must be at least 1".into(),
+            ));
+        }
         self.params(origin)?;
         let check_geometry = |key: String, g: &Geometry| -> Result<()> {
             if g.dim() != d {
@@ -538,6 +602,14 @@ impl Scene {
                     "must be at least 1".into(),
                 ));
             }
+            if f.until_step == Some(0) {
+                return Err(error(
+                    format!("inflow[{i}].until_step"),
+                    "0 stops the inflow before its first emission (at step 0): it would emit \
+                     nothing"
+                        .into(),
+                ));
+            }
         }
         if let Some(b) = &self.run.backend
             && !["ndarray", "burn", "tch"].contains(&b.as_str())
@@ -565,6 +637,14 @@ impl Scene {
         let params = self.params(origin)?;
         let d = self.dim();
         let s = &self.simulation;
+        let cell = domain.cell_size().into_iter().fold(f32::INFINITY, f32::min);
+        if s.push_offset > cell && !self.obstacles.is_empty() {
+            tracing::warn!(
+                "{origin}: simulation.push_offset = {} is more than a cell ({cell}): particles \
+                 pushed out of obstacles jump over the liquid next to them",
+                s.push_offset
+            );
+        }
         let inflows = self
             .inflows
             .iter()
@@ -609,6 +689,26 @@ impl Scene {
             }
             positions.extend(seeded.positions.to_vec());
             velocities.extend(seeded.velocities.to_vec());
+        }
+        for (i, inflow) in self.inflows.iter().enumerate() {
+            // Inflows seed outside the obstacles as they stand at time 0, on every emission
+            // alike: one that covers no free cell centre now never emits.
+            let seeded = simulation.seed(
+                &inflow.geometry,
+                &inflow.velocity,
+                1,
+                Placement::Centered,
+                0,
+            )?;
+            if seeded.is_empty() {
+                return Err(FlipError::Scene {
+                    path: origin.into(),
+                    key: format!("inflow[{i}].geometry"),
+                    reason: "covers no cell centre outside the obstacles: the inflow would emit \
+                             no particle"
+                        .into(),
+                });
+            }
         }
         let particles = Particles::from_host(positions, velocities, d, device)?;
         Ok(SceneSetup {

@@ -16,6 +16,8 @@ mod gradients;
 mod optimize;
 #[path = "flip/random.rs"]
 mod random;
+#[path = "flip/stability.rs"]
+mod stability;
 
 type Nd = NdArray;
 

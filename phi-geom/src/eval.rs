@@ -8,7 +8,7 @@ use phi_core::backend::{CompareOp, ReduceOp};
 use phi_core::{Backend, Tensor, TensorError};
 
 use crate::error::{GeomError, Result};
-use crate::geometry::{AxisBox, Geometry, Rotated};
+use crate::geometry::{AxisBox, Geometry, Rotated, members_apart};
 
 type TResult<T> = std::result::Result<T, TensorError>;
 
@@ -263,24 +263,38 @@ impl Geometry {
                 let local = frame.to_local(p)?;
                 let margin = ROUNDING_MARGIN * (self.coordinate_scale() + offset);
                 let pushed = r.geometry().push_col(&local, direction, offset + margin)?;
-                let moved = match direction {
-                    PushDirection::Outward => r.geometry().inside_col(&local, false)?,
-                    PushDirection::Inward => 1.0 - r.geometry().inside_col(&local, true)?,
-                };
+                // The inner push returns the points it does not move bit for bit, so the moved
+                // ones are those that changed: no second pass over the inner tree (which made
+                // nested rotations quadratic), and the unmoved points skip the round trip.
+                let moved = pushed
+                    .compare(CompareOp::NotEqual, &local)?
+                    .reduce_axis(ReduceOp::Max, 1, true)?;
                 Tensor::select(&moved, &frame.to_world(&pushed)?, p)
             }
-            Geometry::Union(members) => match direction {
+            Geometry::Union(_) => match direction {
                 PushDirection::Outward => {
+                    // Nested unions are one union of all their members, pushed in one set of
+                    // rounds (rounds of rounds would grow exponentially with the nesting); one
+                    // round suffices when no landing point can lie in another member.
+                    let members = self.flat_members();
+                    let margin = ROUNDING_MARGIN * (self.coordinate_scale() + offset);
+                    let rounds = if members_apart(&members, offset + margin) {
+                        1
+                    } else {
+                        UNION_PUSH_ROUNDS
+                    };
                     let mut q = p.clone();
-                    for _ in 0..UNION_PUSH_ROUNDS {
-                        for m in members {
+                    for _ in 0..rounds {
+                        for m in &members {
                             q = m.push_col(&q, PushDirection::Outward, offset)?;
                         }
+                    }
+                    if rounds == 1 {
+                        return Ok(q);
                     }
                     let bounds = self.bounding_box();
                     if bounds.is_finite() {
                         let still_inside = self.inside_col(&q, false)?;
-                        let margin = ROUNDING_MARGIN * (self.coordinate_scale() + offset);
                         let out = Geometry::Box(bounds).push_col(
                             &q,
                             PushDirection::Outward,
@@ -291,6 +305,7 @@ impl Geometry {
                     Ok(q)
                 }
                 PushDirection::Inward => {
+                    let members = self.flat_members();
                     let distances = members
                         .iter()
                         .map(|m| m.sdf_col(p))

@@ -290,6 +290,10 @@ impl Rotated {
 
     fn validate(&self) -> Result<()> {
         self.geometry.validate()?;
+        let depth = self.geometry.depth() + 1;
+        if depth > MAX_DEPTH {
+            return Err(too_deep(depth));
+        }
         self.rotation.validate()?;
         let d = self.geometry.dim();
         if self.rotation.dim() != d {
@@ -324,7 +328,10 @@ impl Rotated {
 
     /// The point the rotation turns about: the given pivot, or the geometry's centre.
     pub fn pivot(&self) -> Vec<f32> {
-        self.pivot.clone().unwrap_or_else(|| self.geometry.center())
+        match &self.pivot {
+            Some(p) => p.clone(),
+            None => self.geometry.center(),
+        }
     }
 
     /// The pivot as given (`None`: the geometry's centre).
@@ -580,6 +587,29 @@ impl Geometry {
     /// [`GeomError::InvalidGeometry`] naming the field and value, or
     /// [`GeomError::DimensionMismatch`] for mixed dimensions.
     pub fn validate(&self) -> Result<()> {
+        let depth = self.depth();
+        if depth > MAX_DEPTH {
+            return Err(too_deep(depth));
+        }
+        if !matches!(self, Geometry::Box(_) | Geometry::Sphere(_)) {
+            let cost = self.push_cost();
+            if cost > MAX_PUSH_COST {
+                return Err(GeomError::invalid(
+                    "geometry",
+                    format!("{cost:.3e} box and ball pushes per push"),
+                    format!(
+                        "more than {MAX_PUSH_COST:e}: overlapping unions inside rotations or \
+                         inversions inside unions multiply the rounds of their pushes; list the \
+                         members of nested unions in one union"
+                    ),
+                ));
+            }
+        }
+        self.validate_tree()
+    }
+
+    /// [`validate`](Self::validate) without the checks of the whole tree's size.
+    fn validate_tree(&self) -> Result<()> {
         match self {
             Geometry::Box(b) => b.validate(),
             Geometry::Sphere(s) => s.validate(),
@@ -593,7 +623,7 @@ impl Geometry {
                     )
                 })?;
                 for m in members {
-                    m.validate()?;
+                    m.validate_tree()?;
                 }
                 let d = first.dim();
                 if let Some((i, m)) = members.iter().enumerate().find(|(_, m)| m.dim() != d) {
@@ -606,7 +636,7 @@ impl Geometry {
                 }
                 Ok(())
             }
-            Geometry::Inverted(inner) => inner.validate(),
+            Geometry::Inverted(inner) => inner.validate_tree(),
         }
     }
 
@@ -625,112 +655,230 @@ impl Geometry {
     /// geometry, the centre of a union's bounding box (the mean of its members' centres when that
     /// box is infinite), the centre of the inverted geometry.
     pub fn center(&self) -> Vec<f32> {
-        match self {
-            Geometry::Box(b) => b.center(),
-            Geometry::Sphere(s) => s.center.clone(),
-            Geometry::Rotated(r) => {
-                let pivot = r.pivot();
-                let rel: Vec<f32> = r
-                    .geometry
-                    .center()
-                    .iter()
-                    .zip(&pivot)
-                    .map(|(c, p)| c - p)
-                    .collect();
-                r.rotation
-                    .apply(&rel)
-                    .iter()
-                    .zip(&pivot)
-                    .map(|(v, p)| v + p)
-                    .collect()
-            }
-            Geometry::Union(members) => {
-                let bounds = self.bounding_box();
-                if bounds.is_finite() {
-                    bounds.center()
-                } else {
-                    let mut mean = vec![0.0; self.dim()];
-                    for m in members {
-                        for (acc, c) in mean.iter_mut().zip(m.center()) {
-                            *acc += c / members.len() as f32;
-                        }
-                    }
-                    mean
-                }
-            }
-            Geometry::Inverted(inner) => inner.center(),
-        }
+        self.summary().center
     }
 
     /// An axis-aligned box containing the geometry: exact for boxes, balls and unions of them,
     /// the box around the rotated corners of the inner bounding box for rotated geometries (the
     /// rotated ball's box for a rotated ball), and the infinite box for inverted geometries.
     pub fn bounding_box(&self) -> AxisBox {
-        match self {
-            Geometry::Box(b) => b.clone(),
-            Geometry::Sphere(s) => AxisBox::unchecked(
-                s.center.iter().map(|c| c - s.radius).collect(),
-                s.center.iter().map(|c| c + s.radius).collect(),
-            ),
-            Geometry::Rotated(r) => {
-                let inner = r.geometry.bounding_box();
-                if !inner.is_finite() {
-                    return inner;
-                }
-                if let Geometry::Sphere(s) = r.geometry.as_ref() {
-                    let center = self.center();
-                    return AxisBox::unchecked(
-                        center.iter().map(|c| c - s.radius).collect(),
-                        center.iter().map(|c| c + s.radius).collect(),
-                    );
-                }
-                let pivot = r.pivot();
-                let d = pivot.len();
-                let mut lower = vec![f32::INFINITY; d];
-                let mut upper = vec![f32::NEG_INFINITY; d];
-                for corner in inner.corners() {
-                    let rel: Vec<f32> = corner.iter().zip(&pivot).map(|(c, p)| c - p).collect();
-                    for (i, v) in r.rotation.apply(&rel).into_iter().enumerate() {
-                        lower[i] = lower[i].min(v + pivot[i]);
-                        upper[i] = upper[i].max(v + pivot[i]);
-                    }
-                }
-                AxisBox::unchecked(lower, upper)
-            }
-            Geometry::Union(members) => members
-                .iter()
-                .map(Geometry::bounding_box)
-                .reduce(|a, b| a.hull(&b))
-                .unwrap_or_else(|| AxisBox::unchecked(vec![], vec![])),
-            Geometry::Inverted(inner) => {
-                let d = inner.dim();
-                AxisBox::unchecked(vec![f32::NEG_INFINITY; d], vec![f32::INFINITY; d])
-            }
-        }
+        self.summary().bounds
     }
 
     /// The largest absolute finite coordinate the geometry's numbers reach (bounding box and
     /// pivots): the scale of its rounding errors.
     pub(crate) fn coordinate_scale(&self) -> f32 {
+        self.summary().scale
+    }
+
+    /// Centre, bounding box and coordinate scale together, in one pass over the tree (each of
+    /// them needs the others' values of the children, so computing them apart would visit a
+    /// nested geometry's children again and again).
+    fn summary(&self) -> Summary {
         let finite_max = |v: &[f32]| {
             v.iter()
                 .filter(|x| x.is_finite())
                 .fold(0.0f32, |m, x| m.max(x.abs()))
         };
-        let b = self.bounding_box();
-        let own = finite_max(&b.lower).max(finite_max(&b.upper));
+        let own_scale = |b: &AxisBox| finite_max(&b.lower).max(finite_max(&b.upper));
         match self {
-            Geometry::Rotated(r) => own
-                .max(finite_max(&r.pivot()))
-                .max(r.geometry.coordinate_scale()),
-            Geometry::Union(members) => {
-                members.iter().fold(own, |m, g| m.max(g.coordinate_scale()))
+            Geometry::Box(b) => Summary {
+                center: b.center(),
+                scale: own_scale(b),
+                bounds: b.clone(),
+            },
+            Geometry::Sphere(s) => {
+                let bounds = AxisBox::unchecked(
+                    s.center.iter().map(|c| c - s.radius).collect(),
+                    s.center.iter().map(|c| c + s.radius).collect(),
+                );
+                Summary {
+                    center: s.center.clone(),
+                    scale: own_scale(&bounds),
+                    bounds,
+                }
             }
-            Geometry::Inverted(inner) => inner.coordinate_scale(),
-            _ => own,
+            Geometry::Rotated(r) => {
+                let inner = r.geometry.summary();
+                let pivot = r.pivot.clone().unwrap_or_else(|| inner.center.clone());
+                let turn = |point: &[f32]| -> Vec<f32> {
+                    let rel: Vec<f32> = point.iter().zip(&pivot).map(|(c, p)| c - p).collect();
+                    r.rotation
+                        .apply(&rel)
+                        .iter()
+                        .zip(&pivot)
+                        .map(|(v, p)| v + p)
+                        .collect()
+                };
+                let center = turn(&inner.center);
+                let bounds = if !inner.bounds.is_finite() {
+                    inner.bounds.clone()
+                } else if let Geometry::Sphere(s) = r.geometry.as_ref() {
+                    AxisBox::unchecked(
+                        center.iter().map(|c| c - s.radius).collect(),
+                        center.iter().map(|c| c + s.radius).collect(),
+                    )
+                } else {
+                    let d = pivot.len();
+                    let mut lower = vec![f32::INFINITY; d];
+                    let mut upper = vec![f32::NEG_INFINITY; d];
+                    for corner in inner.bounds.corners() {
+                        for (i, v) in turn(&corner).into_iter().enumerate() {
+                            lower[i] = lower[i].min(v);
+                            upper[i] = upper[i].max(v);
+                        }
+                    }
+                    AxisBox::unchecked(lower, upper)
+                };
+                Summary {
+                    scale: own_scale(&bounds)
+                        .max(finite_max(&pivot))
+                        .max(inner.scale),
+                    center,
+                    bounds,
+                }
+            }
+            Geometry::Union(members) => {
+                let parts: Vec<Summary> = members.iter().map(Geometry::summary).collect();
+                let bounds = parts
+                    .iter()
+                    .map(|p| p.bounds.clone())
+                    .reduce(|a, b| a.hull(&b))
+                    .unwrap_or_else(|| AxisBox::unchecked(vec![], vec![]));
+                let center = if bounds.is_finite() {
+                    bounds.center()
+                } else {
+                    let mut mean = vec![0.0; self.dim()];
+                    for p in &parts {
+                        for (acc, c) in mean.iter_mut().zip(&p.center) {
+                            *acc += c / parts.len() as f32;
+                        }
+                    }
+                    mean
+                };
+                Summary {
+                    scale: parts.iter().fold(own_scale(&bounds), |m, p| m.max(p.scale)),
+                    center,
+                    bounds,
+                }
+            }
+            Geometry::Inverted(inner) => {
+                let inner = inner.summary();
+                let d = inner.center.len();
+                Summary {
+                    center: inner.center,
+                    scale: inner.scale,
+                    bounds: AxisBox::unchecked(vec![f32::NEG_INFINITY; d], vec![f32::INFINITY; d]),
+                }
+            }
+        }
+    }
+
+    /// The members of a union with nested unions expanded (a union of unions is the union of
+    /// all their members); any other geometry is its own only member.
+    pub(crate) fn flat_members(&self) -> Vec<&Geometry> {
+        let mut out = Vec::new();
+        let mut stack = vec![self];
+        while let Some(g) = stack.pop() {
+            match g {
+                Geometry::Union(members) => stack.extend(members.iter().rev()),
+                other => out.push(other),
+            }
+        }
+        out
+    }
+
+    /// How deep the tree is: 1 for a box or ball, one more per rotation, union or inversion
+    /// around it. Iterative, so that it can check trees too deep to recurse into.
+    pub fn depth(&self) -> usize {
+        let mut deepest = 0;
+        let mut stack = vec![(self, 1usize)];
+        while let Some((g, depth)) = stack.pop() {
+            deepest = deepest.max(depth);
+            match g {
+                Geometry::Box(_) | Geometry::Sphere(_) => {}
+                Geometry::Rotated(r) => stack.push((&r.geometry, depth + 1)),
+                Geometry::Union(members) => stack.extend(members.iter().map(|m| (m, depth + 1))),
+                Geometry::Inverted(inner) => stack.push((inner, depth + 1)),
+            }
+        }
+        deepest
+    }
+
+    /// How many pushes of boxes and balls one [`push`](Geometry::push) may evaluate: one per
+    /// primitive, times the rounds of each union's outward push (one when its members'
+    /// bounding boxes are apart, [`UNION_PUSH_ROUNDS`](crate::UNION_PUSH_ROUNDS) otherwise).
+    /// Linear in the size of the tree except where unions sit inside rotations or inversions
+    /// inside unions, whose rounds multiply.
+    pub fn push_cost(&self) -> f64 {
+        match self {
+            Geometry::Box(_) | Geometry::Sphere(_) => 1.0,
+            Geometry::Rotated(r) => r.geometry.push_cost(),
+            Geometry::Inverted(inner) => inner.push_cost(),
+            Geometry::Union(_) => {
+                let members = self.flat_members();
+                let rounds = if members_apart(&members, 0.0) {
+                    1.0
+                } else {
+                    crate::eval::UNION_PUSH_ROUNDS as f64
+                };
+                rounds * members.iter().map(|m| m.push_cost()).sum::<f64>()
+            }
         }
     }
 }
+
+/// Whether the bounding boxes of `members`, grown by `grow` on every side, are pairwise
+/// disjoint (touching counts as overlapping): then a point pushed out of one member cannot land
+/// in another. Sorted by their lower corner along axis 0, so that boxes apart along it are not
+/// compared.
+pub(crate) fn members_apart(members: &[&Geometry], grow: f32) -> bool {
+    let mut boxes: Vec<AxisBox> = members.iter().map(|m| m.bounding_box()).collect();
+    if boxes.iter().any(|b| !b.is_finite()) {
+        return members.len() <= 1;
+    }
+    boxes.sort_by(|a, b| a.lower[0].total_cmp(&b.lower[0]));
+    for (i, a) in boxes.iter().enumerate() {
+        for b in &boxes[i + 1..] {
+            if b.lower[0] - grow > a.upper[0] + grow {
+                break;
+            }
+            let overlap = (0..a.dim()).all(|k| {
+                a.lower[k] - grow <= b.upper[k] + grow && b.lower[k] - grow <= a.upper[k] + grow
+            });
+            if overlap {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// The error of a tree `depth` levels deep, beyond [`MAX_DEPTH`].
+fn too_deep(depth: usize) -> GeomError {
+    GeomError::invalid(
+        "geometry",
+        format!("a tree {depth} levels deep"),
+        format!(
+            "rotations, unions and inversions nest at most {MAX_DEPTH} deep; combine rotations \
+             into one and list union members side by side"
+        ),
+    )
+}
+
+/// [`Geometry::summary`]: what a node's parent needs of it.
+struct Summary {
+    center: Vec<f32>,
+    bounds: AxisBox,
+    scale: f32,
+}
+
+/// The deepest geometry tree accepted (see [`Geometry::depth`]): deeper ones are refused
+/// rather than recursed into.
+pub const MAX_DEPTH: usize = 128;
+
+/// The most box and ball pushes one push may evaluate (see [`Geometry::push_cost`]).
+pub const MAX_PUSH_COST: f64 = 1e5;
 
 fn check_dim(field: &str, v: &[f32]) -> Result<()> {
     if (1..=3).contains(&v.len()) {

@@ -35,6 +35,6 @@ mod rotation;
 
 pub use error::{GeomError, Result};
 pub use eval::{PushDirection, UNION_PUSH_ROUNDS};
-pub use geometry::{AxisBox, Geometry, Rotated, Sphere};
+pub use geometry::{AxisBox, Geometry, MAX_DEPTH, MAX_PUSH_COST, Rotated, Sphere};
 pub use obstacle::Obstacle;
 pub use rotation::Rotation;

@@ -1140,3 +1140,122 @@ velocity = [1.5, 0]
         assert!(toml::from_str::<AxisBox>("lower = [1, 0]\nupper = [0, 8]").is_err());
     }
 }
+
+/// Deeply nested geometries evaluate in time linear in their size (no timing asserted: the
+/// depths below took minutes or never finished when children were evaluated repeatedly), and
+/// agree with the shape they nest.
+mod nesting {
+    use super::*;
+
+    /// A box wrapped in `depth` unions of itself with a small ball inside it (which changes
+    /// nothing), as written in a scene file.
+    fn nested_unions(depth: usize) -> Geometry {
+        let mut text = String::from(r#"{ type = "box", lower = [2, 3], upper = [10, 7] }"#);
+        for _ in 0..depth {
+            text = format!(
+                r#"{{ type = "union", members = [{text}, {{ type = "sphere", center = [5, 5], radius = 1 }}] }}"#
+            );
+        }
+        toml::from_str::<toml::Table>(&format!("g = {text}"))
+            .unwrap()
+            .get("g")
+            .unwrap()
+            .clone()
+            .try_into()
+            .unwrap()
+    }
+
+    /// The box rotated `depth` times by 360°/`depth` (a full turn in all) about its centre.
+    fn nested_rotations(depth: usize) -> Geometry {
+        let mut g = Geometry::boxed([2.0, 3.0], [10.0, 7.0]).unwrap();
+        for _ in 0..depth {
+            g = g.rotated(Rotation::degrees(360.0 / depth as f32)).unwrap();
+        }
+        g
+    }
+
+    fn check_against_the_box(g: &Geometry, tol: f32) {
+        let plain = Geometry::boxed([2.0, 3.0], [10.0, 7.0]).unwrap();
+        // Points away from the surface, where rounding of the turns cannot flip the answers.
+        let p = random_points(400, 2, 0.0, 12.0, 3);
+        let sdf = plain.approximate_signed_distance(&p).unwrap().to_vec();
+        let far: Vec<f32> = p
+            .to_vec()
+            .chunks(2)
+            .zip(&sdf)
+            .filter(|(_, d)| d.abs() > 0.05)
+            .flat_map(|(q, _)| q.to_vec())
+            .collect();
+        let p = points(&far, 2);
+        assert_eq!(
+            g.lies_inside(&p).unwrap().to_vec(),
+            plain.lies_inside(&p).unwrap().to_vec()
+        );
+        assert_close(
+            &g.approximate_signed_distance(&p).unwrap().to_vec(),
+            &plain.approximate_signed_distance(&p).unwrap().to_vec(),
+            tol,
+        );
+        let pushed = g.push(&p, PushDirection::Outward, 0.0).unwrap().to_vec();
+        let want = plain.push(&p, PushDirection::Outward, 0.0).unwrap().to_vec();
+        assert_close(&pushed, &want, tol);
+        let pushed = g.push(&p, PushDirection::Inward, 0.0).unwrap().to_vec();
+        let want = plain.push(&p, PushDirection::Inward, 0.0).unwrap().to_vec();
+        assert_close(&pushed, &want, tol);
+    }
+
+    #[test]
+    fn unions_nested_forty_deep_are_the_box() {
+        let g = nested_unions(40);
+        assert_eq!(g.depth(), 41);
+        let b = g.bounding_box();
+        assert_eq!((b.lower(), b.upper()), (&[2.0, 3.0][..], &[10.0, 7.0][..]));
+        assert_eq!(g.center(), vec![6.0, 5.0]);
+        check_against_the_box(&g, 0.0);
+    }
+
+    #[test]
+    fn rotations_nested_fifty_deep_are_the_box() {
+        let g = nested_rotations(50);
+        assert_eq!(g.depth(), 51);
+        assert_close(&g.center(), &[6.0, 5.0], 1e-4);
+        check_against_the_box(&g, 3e-3);
+    }
+
+    /// Too deep a tree, or unions whose rounds multiply past the bound, are refused with a clear
+    /// error instead of being recursed into.
+    #[test]
+    fn trees_beyond_the_bounds_are_refused() {
+        let mut g = Geometry::boxed([2.0, 3.0], [10.0, 7.0]).unwrap();
+        let mut error = None;
+        for _ in 0..phi_geom::MAX_DEPTH + 5 {
+            match g.clone().rotated(Rotation::degrees(1.0)) {
+                Ok(next) => g = next,
+                Err(e) => {
+                    error = Some(e.to_string());
+                    break;
+                }
+            }
+        }
+        let e = error.expect("a tree deeper than MAX_DEPTH must be refused");
+        assert!(e.contains("nest at most"), "{e}");
+        // Overlapping unions inside rotations inside unions: 4 rounds per level.
+        let ball = Geometry::sphere([5.0, 5.0], 2.0).unwrap();
+        let mut g = ball.clone();
+        let mut error = None;
+        for _ in 0..20 {
+            let u = Geometry::union(vec![g.clone(), ball.clone()]).and_then(|u| {
+                u.rotated(Rotation::degrees(10.0))
+            });
+            match u {
+                Ok(next) => g = next,
+                Err(e) => {
+                    error = Some(e.to_string());
+                    break;
+                }
+            }
+        }
+        let e = error.expect("multiplying rounds must be refused");
+        assert!(e.contains("pushes per push"), "{e}");
+    }
+}

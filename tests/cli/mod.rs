@@ -9,6 +9,7 @@ use phi::output::read_npz;
 mod dataset;
 mod dataset_faults;
 mod eval;
+mod faults;
 mod optimize;
 mod rollout;
 mod train;

@@ -4,10 +4,10 @@
 use std::sync::atomic::Ordering;
 
 use phi_core::backend::Backend;
-use phi_core::fields::{Domain, Projection};
+use phi_core::fields::Domain;
 use phi_core::host::all_finite;
 
-use super::{FlipSimulation, Particles, SceneParameters, StepStats};
+use super::{FlipSimulation, Particles, SceneParameters};
 use crate::error::{FlipError, Result};
 
 impl<B: Backend> FlipSimulation<B> {
@@ -81,13 +81,15 @@ impl<B: Backend> FlipSimulation<B> {
     }
 }
 
-/// Checks that the particles a step produced are finite: their `positions` (host data `[N·d]`,
-/// read back once for this and the statistics), velocities and affine matrices.
+/// Checks that the particles a step produced are finite: their `positions` and `velocities`
+/// (host data `[N·d]`, read back once for this, the CFL number and the statistics) and affine
+/// matrices.
 ///
 /// # Errors
 /// [`FlipError::NonFinite`] naming `step` and the first quantity that is not finite.
 pub(super) fn check_finite<B: Backend>(
     positions: &[f32],
+    velocities: &[f32],
     particles: &Particles<B>,
     step: usize,
 ) -> Result<()> {
@@ -95,7 +97,7 @@ pub(super) fn check_finite<B: Backend>(
     if !all_finite(positions) {
         return non_finite("particle positions");
     }
-    if !all_finite(&particles.velocities.host_values()) {
+    if !all_finite(velocities) {
         return non_finite("particle velocities");
     }
     if let Some(c) = &particles.affine
@@ -106,34 +108,34 @@ pub(super) fn check_finite<B: Backend>(
     Ok(())
 }
 
-impl StepStats {
-    /// The statistics of a step whose pressure `projection` (line 5 of algorithm 1) moved
-    /// `particles` particles from `before` to `after` (host data `[N·d]`, finite).
-    pub(super) fn collect<B: Backend>(
-        projection: &Projection<B>,
-        particles: usize,
-        before: &[f32],
-        after: &[f32],
-        domain: &Domain,
-    ) -> Self {
-        let max_displacement_cells = match domain.dim() {
-            1 => largest_displacement::<1>(after, before, domain),
-            2 => largest_displacement::<2>(after, before, domain),
-            _ => largest_displacement::<3>(after, before, domain),
-        };
-        Self {
-            solve: projection.stats,
-            liquid_cells: projection.unknowns,
-            particles,
-            max_displacement_cells,
+/// The largest absolute value per axis of velocities `[N·d]` (row-major `[N, d]`); NaN when
+/// one is NaN.
+pub(super) fn largest_speed_per_axis(velocities: &[f32], d: usize) -> Vec<f32> {
+    let mut largest = vec![0.0f32; d];
+    for v in velocities.chunks_exact(d) {
+        for (m, x) in largest.iter_mut().zip(v) {
+            let a = x.abs();
+            if a > *m || a.is_nan() {
+                *m = a;
+            }
         }
+    }
+    largest
+}
+
+/// The largest distance in cells between `after` and `before` (host data `[N·d]`, finite).
+pub(super) fn largest_displacement(after: &[f32], before: &[f32], domain: &Domain) -> f32 {
+    match domain.dim() {
+        1 => largest_displacement_in::<1>(after, before, domain),
+        2 => largest_displacement_in::<2>(after, before, domain),
+        _ => largest_displacement_in::<3>(after, before, domain),
     }
 }
 
 /// The largest distance in cells between `after` and `before` (points `[N, D]`, row-major, all
 /// finite). The square root is taken once, of the largest square (it is monotonic), and the
 /// maximum runs in independent lanes: a running maximum over the points would chain them all.
-fn largest_displacement<const D: usize>(after: &[f32], before: &[f32], domain: &Domain) -> f32 {
+fn largest_displacement_in<const D: usize>(after: &[f32], before: &[f32], domain: &Domain) -> f32 {
     const LANES: usize = 8;
     let dx = domain.cell_size();
     let squared = |a: &[f32], b: &[f32]| {
@@ -194,7 +196,7 @@ mod tests {
                     (x * x + y * y).sqrt()
                 })
                 .fold(0.0f32, f32::max);
-            let got = largest_displacement::<2>(&after, &before, &domain);
+            let got = largest_displacement_in::<2>(&after, &before, &domain);
             assert_eq!(got, want, "n {n}");
         }
     }

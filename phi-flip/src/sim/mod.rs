@@ -17,8 +17,16 @@ use phi_geom::{Geometry, Obstacle};
 
 use crate::error::{FlipError, Result};
 use crate::seed::{Placement, seed_particles};
-use checks::check_finite;
+use checks::{check_finite, largest_displacement, largest_speed_per_axis};
 use obstacles::ObstacleMasks;
+
+/// The CFL limit of scene files (`simulation.max_cfl`): a step that carries the fastest
+/// particle or grid velocity across more than this many cells fails. Far beyond what FLIP
+/// handles (≈ 5 cells), far below what blown-up runs reach (10³ and more).
+pub const DEFAULT_MAX_CFL: f32 = 20.0;
+
+/// The default of [`FlipParams::max_substeps`].
+pub const DEFAULT_MAX_SUBSTEPS: usize = 10_000;
 
 /// The numerical parameters of a FLIP simulation.
 #[derive(Debug, Clone, PartialEq)]
@@ -48,11 +56,22 @@ pub struct FlipParams {
     pub push_offset: f32,
     /// A step whose particles move farther than this many cells logs a CFL warning.
     pub cfl_warning_cells: f32,
+    /// Adaptive sub-stepping: when set, each step of `dt` is split into sub-steps short enough
+    /// that the CFL number of each stays near this value (see [`FlipSimulation::step_with`]).
+    /// `None`: one sub-step of `dt` (the thesis).
+    pub cfl: Option<f32>,
+    /// A (sub-)step whose CFL number exceeds this fails with [`FlipError::Unstable`]
+    /// (`f32::INFINITY`: never).
+    pub max_cfl: f32,
+    /// The most sub-steps one step may take with [`cfl`](Self::cfl); a step that would need more
+    /// fails with [`FlipError::Unstable`].
+    pub max_substeps: usize,
 }
 
 impl FlipParams {
     /// The thesis' parameters for a `d`-dimensional domain with time step `dt`: FLIP, gravity
-    /// `−9.81` along the last axis, linear transfer, default solve, push offset 0.
+    /// `−9.81` along the last axis, linear transfer, default solve, push offset 0, no
+    /// sub-stepping and no CFL limit (scene files set one, [`DEFAULT_MAX_CFL`]).
     pub fn thesis(dim: usize, dt: f32) -> Self {
         let mut gravity = vec![0.0; dim];
         if let Some(g) = gravity.last_mut() {
@@ -67,6 +86,9 @@ impl FlipParams {
             solve: SolveOptions::default(),
             push_offset: 0.0,
             cfl_warning_cells: 3.0,
+            cfl: None,
+            max_cfl: f32::INFINITY,
+            max_substeps: DEFAULT_MAX_SUBSTEPS,
         }
     }
 
@@ -104,6 +126,20 @@ impl FlipParams {
                 "push_offset",
                 format!("must be finite and not negative, got {}", self.push_offset),
             );
+        }
+        if let Some(cfl) = self.cfl
+            && !(cfl.is_finite() && cfl > 0.0)
+        {
+            return invalid("cfl", format!("must be positive and finite, got {cfl}"));
+        }
+        if !(self.max_cfl > 0.0) {
+            return invalid(
+                "max_cfl",
+                format!("must be positive (inf: no limit), got {}", self.max_cfl),
+            );
+        }
+        if self.max_substeps == 0 {
+            return invalid("max_substeps", "must be at least 1".into());
         }
         Ok(())
     }
@@ -257,14 +293,19 @@ impl<B: Backend> SceneParameters<B> {
 /// What one step did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct StepStats {
-    /// The pressure solve's iterations (0 for a direct solve) and residual.
+    /// The pressure solve's iterations (0 for a direct solve; summed over the sub-steps) and
+    /// residual (the largest of the sub-steps).
     pub solve: SolveStats,
-    /// Liquid cells (unknowns of the pressure solve).
+    /// Liquid cells (unknowns of the pressure solve of the last sub-step).
     pub liquid_cells: usize,
     /// Particles after the step.
     pub particles: usize,
     /// The largest particle displacement of the step, in cells.
     pub max_displacement_cells: f32,
+    /// The largest CFL number of its sub-steps (see [`FlipSimulation::step_with`]).
+    pub cfl: f32,
+    /// Sub-steps taken (1 without [`FlipParams::cfl`]).
+    pub substeps: usize,
 }
 
 /// A FLIP liquid simulation on a [`Domain`] with obstacles and inflows, generic over the backend.
@@ -534,17 +575,37 @@ impl<B: LatticeKernels> FlipSimulation<B> {
     }
 
     /// One step from `particles` at step index `step` (time `step · dt`): inflows emit, then
-    /// thesis algorithm 1.
+    /// thesis algorithm 1 (in sub-steps with [`FlipParams::cfl`]).
     ///
     /// # Errors
     /// [`FlipError::Solve`] when the pressure solve fails, [`FlipError::NonFinite`] when the new
-    /// state is not finite.
+    /// state is not finite, [`FlipError::Unstable`] when the CFL number exceeds
+    /// [`FlipParams::max_cfl`] or sub-stepping would need more than
+    /// [`FlipParams::max_substeps`].
     pub fn step(&self, particles: &Particles<B>, step: usize) -> Result<(Particles<B>, StepStats)> {
         self.step_with(particles, step, &self.defaults)
     }
 
     /// [`step`](Self::step) with the scene parameters `scene` (gravity, obstacle offsets, inflow
     /// velocities) given as tensors, so that gradients reach them.
+    ///
+    /// # Stability
+    /// Every (sub-)step measures its CFL number `C = h · maxₐ max|uₐ| / Δxₐ`, over the grid
+    /// velocity after the projection and the particles' new velocities (`h` the sub-step
+    /// length), and fails with [`FlipError::Unstable`] when `C` exceeds
+    /// [`FlipParams::max_cfl`]. That one number covers the ways a run blows up: exploding
+    /// velocities raise it directly, and particles can only pile onto a wall or a corner by
+    /// being carried across the domain in one step, which is a large `C` (the advection moves no
+    /// particle farther than `C` cells). Non-finite states fail with [`FlipError::NonFinite`].
+    ///
+    /// # Sub-steps
+    /// With [`FlipParams::cfl`] = `c`, the step of `dt` runs as sub-steps, each as long as
+    /// possible up to what is left of `dt`: a sub-step of length `h` whose particles move at
+    /// most `|vₐ|` (read before it) and which gravity speeds up by `|gₐ| h` satisfies
+    /// `h (|vₐ| + |gₐ| h) ≤ c Δxₐ` on every axis. A last piece shorter than one such sub-step is
+    /// shared with the one before (two halves), so no sub-step is tiny. Inflows emit once, before
+    /// the first sub-step. The number of sub-steps is chosen on the host and held constant for
+    /// gradients, like the other discrete choices.
     ///
     /// # Errors
     /// As [`step`](Self::step), and [`FlipError::InvalidParameter`] when `scene` does not fit the
@@ -562,28 +623,162 @@ impl<B: LatticeKernels> FlipSimulation<B> {
             return Ok((particles, StepStats::default()));
         }
         let dt = self.params.dt;
-        let time = step as f32 * dt;
-        let masks = self.masks_at(time, &offsets)?;
-        // Thesis algorithm 1, lines 3 to 8, one stage each.
-        let (splatted, valid) = self.particles_to_grid(&particles)?;
-        let forced = self.add_gravity(&splatted, &scene.gravity)?;
-        // Read back once: the occupancy of the projection and the step's largest displacement.
-        let before = particles.positions.host_values();
-        let projection = self.make_incompressible(&forced, &before, &masks, step)?;
+        let start = step as f32 * dt;
+        // Read back once per sub-step: the occupancy of the projection and the displacement.
+        let before = particles.positions.host_values().into_owned();
+        let mut state = particles;
+        let mut host = before.clone();
+        let mut stats = StepStats::default();
+        let mut done = 0.0f32;
+        loop {
+            let remaining = dt - done;
+            let h = match self.params.cfl {
+                None => dt,
+                Some(target) => self.substep_length(&state, remaining, target, step, stats)?,
+            };
+            let last = h >= remaining;
+            let h = if last { remaining } else { h };
+            let sub = self.substep(&state, &host, start + done, h, step, scene, &offsets)?;
+            state = sub.particles;
+            host = sub.positions;
+            stats.substeps += 1;
+            stats.cfl = stats.cfl.max(sub.cfl);
+            stats.solve.iterations += sub.projection.stats.iterations;
+            stats.solve.residual = stats.solve.residual.max(sub.projection.stats.residual);
+            stats.liquid_cells = sub.projection.unknowns;
+            if last {
+                break;
+            }
+            done += h;
+        }
+        stats.particles = state.len();
+        stats.max_displacement_cells = largest_displacement(&host, &before, &self.domain);
+        Ok((state, stats))
+    }
+
+    /// Thesis algorithm 1, lines 3 to 8, one stage each, over `h` seconds from `time`, for
+    /// `particles` at `positions` (their host data `[N·d]`); checks the new state (finite, CFL
+    /// number within [`FlipParams::max_cfl`]).
+    #[allow(clippy::too_many_arguments)]
+    fn substep(
+        &self,
+        particles: &Particles<B>,
+        positions: &[f32],
+        time: f32,
+        h: f32,
+        step: usize,
+        scene: &SceneParameters<B>,
+        offsets: &[Vec<f32>],
+    ) -> Result<Substep<B>> {
+        let masks = self.masks_at(time, offsets)?;
+        let (splatted, valid) = self.particles_to_grid(particles)?;
+        let forced = self.add_gravity(&splatted, &scene.gravity, h)?;
+        let projection = self.make_incompressible(&forced, positions, &masks, step)?;
         let (velocities, affine) =
-            self.map_velocity_to_particles(&particles, &splatted, &projection.velocity, &valid)?;
-        let advected = self.advect(&particles.positions, &projection.velocity, &valid, step)?;
-        let positions = self.respect_boundaries(advected, time + dt, &scene.obstacle_offsets)?;
+            self.map_velocity_to_particles(particles, &splatted, &projection.velocity, &valid)?;
+        let (advected, grid_speed) =
+            self.advect(&particles.positions, &projection.velocity, &valid, h, step)?;
+        let positions = self.respect_boundaries(advected, time + h, &scene.obstacle_offsets)?;
         let next = Particles {
             positions,
             velocities,
             affine,
         };
-        let stats = {
-            let after = next.positions.host_values();
-            check_finite(&after, &next, step)?;
-            StepStats::collect(&projection, next.len(), &before, &after, &self.domain)
-        };
-        Ok((next, stats))
+        let after = next.positions.host_values().into_owned();
+        let velocities = next.velocities.host_values();
+        check_finite(&after, &velocities, &next, step)?;
+        let particle_speed = largest_speed_per_axis(&velocities, self.domain.dim());
+        let cfl = self.cfl_number(&grid_speed, h).max(self.cfl_number(&particle_speed, h));
+        if !(cfl <= self.params.max_cfl) {
+            return Err(FlipError::Unstable {
+                step,
+                cfl,
+                dt: h,
+                why: format!(
+                    "(the fastest velocity crosses {cfl:.3} cells in one step), above the limit \
+                     max_cfl = {}",
+                    self.params.max_cfl
+                ),
+            });
+        }
+        Ok(Substep {
+            particles: next,
+            positions: after,
+            projection,
+            cfl,
+        })
     }
+
+    /// `h · maxₐ speedₐ / Δxₐ`: the CFL number of per-axis speeds `speed` over `h` seconds.
+    fn cfl_number(&self, speed: &[f32], h: f32) -> f32 {
+        let dx = self.domain.cell_size();
+        speed
+            .iter()
+            .zip(&dx)
+            .map(|(s, dx)| h * s / dx)
+            .fold(0.0f32, |m, c| if c.is_nan() { c } else { m.max(c) })
+    }
+
+    /// The length of the next sub-step with CFL target `target` when `remaining` seconds of
+    /// the step are left (see [`step_with`](Self::step_with)); `stats` counts the sub-steps
+    /// taken so far.
+    fn substep_length(
+        &self,
+        particles: &Particles<B>,
+        remaining: f32,
+        target: f32,
+        step: usize,
+        stats: StepStats,
+    ) -> Result<f32> {
+        let speed = largest_speed_per_axis(&particles.velocities.host_values(), self.domain.dim());
+        let dx = self.domain.cell_size();
+        // The largest h with h (v + g h) ≤ c Δx, in the form that cannot cancel:
+        // h = 2 c Δx / (v + √(v² + 4 g c Δx)).
+        let longest = speed
+            .iter()
+            .zip(&self.params.gravity)
+            .zip(&dx)
+            .map(|((&v, &g), &dx)| {
+                let budget = target * dx;
+                let g = g.abs();
+                let denominator = v + (v * v + 4.0 * g * budget).sqrt();
+                if denominator > 0.0 {
+                    2.0 * budget / denominator
+                } else {
+                    f32::INFINITY
+                }
+            })
+            .fold(f32::INFINITY, f32::min);
+        let h = if longest >= remaining {
+            remaining
+        } else if 2.0 * longest > remaining {
+            0.5 * remaining
+        } else {
+            longest
+        };
+        let needed = stats.substeps as f64 + (f64::from(remaining) / f64::from(h)).ceil();
+        if !(h > 0.0) || needed > self.params.max_substeps as f64 {
+            let cfl = self.cfl_number(&speed, self.params.dt);
+            return Err(FlipError::Unstable {
+                step,
+                cfl,
+                dt: self.params.dt,
+                why: format!(
+                    "(estimated from the particle velocities and gravity): keeping it below cfl = \
+                     {target} needs about {needed:.3e} sub-steps, more than max_substeps = {}",
+                    self.params.max_substeps
+                ),
+            });
+        }
+        Ok(h)
+    }
+}
+
+/// What one sub-step produced.
+struct Substep<B: Backend> {
+    particles: Particles<B>,
+    /// The new positions on the host, `[N·d]`.
+    positions: Vec<f32>,
+    projection: phi_core::fields::Projection<B>,
+    cfl: f32,
 }

@@ -44,13 +44,13 @@ impl<B: LatticeKernels> FlipSimulation<B> {
     }
 
     /// Line 4, "add forces (e.g. gravity) to `uᵢ`": `u + g Δt` on every face, with the gravity
-    /// `g` `[d]` in domain units per s².
+    /// `g` `[d]` in domain units per s² and the (sub-)step `dt`.
     pub(super) fn add_gravity(
         &self,
         velocity: &StaggeredGrid<B>,
         gravity: &Tensor<B>,
+        dt: f32,
     ) -> Result<StaggeredGrid<B>> {
-        let dt = self.params.dt;
         Ok(velocity.map(|axis, c| Ok(c + &(gravity.narrow(0, axis..axis + 1)? * dt)))?)
     }
 
@@ -131,43 +131,51 @@ impl<B: LatticeKernels> FlipSimulation<B> {
     /// Line 7, "advect particles and their values on the grid using an ODE solver": the grid
     /// velocity `u_f` extrapolated beyond the `valid` faces far enough for this step's motion
     /// ([`extrapolation_layers`](Self::extrapolation_layers)), and the `positions` `[N, d]`
-    /// moved through it by RK4 over `Δt`. Returns the new positions `[N, d]`.
+    /// moved through it by RK4 over the (sub-)step `dt`. Returns the new positions `[N, d]` and
+    /// the largest speed of `u_f` per axis.
     pub(super) fn advect(
         &self,
         positions: &Tensor<B>,
         velocity: &StaggeredGrid<B>,
         valid: &StaggeredGrid<B>,
+        dt: f32,
         step: usize,
-    ) -> Result<Tensor<B>> {
-        let layers = self.extrapolation_layers(velocity, step)?;
+    ) -> Result<(Tensor<B>, Vec<f32>)> {
+        let (layers, speed) = self.extrapolation_layers(velocity, dt, step)?;
         let (advection_field, _) = extrapolate_valid(velocity, valid, layers)?;
-        Ok(advect_points(
-            positions,
-            &advection_field,
-            self.params.dt,
-            Integrator::Rk4,
-        )?)
+        Ok((
+            advect_points(positions, &advection_field, dt, Integrator::Rk4)?,
+            speed,
+        ))
     }
 
-    /// How many layers of extrapolation cover this step's motion: `⌈max|u| Δt / Δx⌉ + 2` (the
-    /// fastest face, the smallest cell side), at most the largest resolution; logs a CFL warning
-    /// (once per simulation) when the reach exceeds [`FlipParams::cfl_warning_cells`].
+    /// How many layers of extrapolation cover the motion of a (sub-)step of `dt`:
+    /// `⌈max|u| Δt / Δx⌉ + 2` (the fastest face, the smallest cell side), at most the largest
+    /// resolution; logs a CFL warning (once per simulation) when the reach exceeds
+    /// [`FlipParams::cfl_warning_cells`]. Returns the layers and the largest `|uₐ|` per axis.
     ///
     /// [`FlipParams::cfl_warning_cells`]: super::FlipParams::cfl_warning_cells
-    fn extrapolation_layers(&self, velocity: &StaggeredGrid<B>, step: usize) -> Result<usize> {
+    fn extrapolation_layers(
+        &self,
+        velocity: &StaggeredGrid<B>,
+        dt: f32,
+        step: usize,
+    ) -> Result<(usize, Vec<f32>)> {
         let domain = &self.domain;
-        let speed = velocity
+        let per_axis = velocity
             .components()
             .iter()
             .map(|c| c.abs().reduce(ReduceOp::Max).map(|m| m.to_vec()[0]))
-            .collect::<std::result::Result<Vec<f32>, TensorError>>()?
-            .into_iter()
-            .fold(0.0f32, f32::max);
+            .collect::<std::result::Result<Vec<f32>, TensorError>>()?;
+        let speed = per_axis.iter().copied().fold(0.0f32, f32::max);
         let min_dx = domain.cell_size().into_iter().fold(f32::INFINITY, f32::min);
-        let reach_cells = speed * self.params.dt / min_dx;
+        let reach_cells = speed * dt / min_dx;
         self.log_cfl(reach_cells, step);
-        Ok((reach_cells.ceil() as usize + 2)
-            .min(domain.resolution().iter().copied().max().unwrap_or(1)))
+        // A non-finite reach casts to the largest usize, clamped to the resolution below.
+        let layers = (reach_cells.ceil() as usize)
+            .saturating_add(2)
+            .min(domain.resolution().iter().copied().max().unwrap_or(1));
+        Ok((layers, per_axis))
     }
 
     /// Line 8, "push particles outside of boundaries or obstacles": `positions` `[N, d]` pushed
