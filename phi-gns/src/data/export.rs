@@ -187,7 +187,7 @@ pub fn lagrangebench_metadata(dataset: &Dataset) -> Result<serde_json::Value, Da
     for (split, &count) in &m.splits {
         for index in 0..count {
             let path = Dataset::trajectory_path(dataset.dir(), split, index);
-            let (_, particles, _) = super::trajectory::read_trajectory_shape(&path)?;
+            let particles = super::trajectory::read_trajectory_identity(&path)?.particles;
             num_particles_max = num_particles_max.max(particles);
         }
     }

@@ -337,19 +337,20 @@ pub fn read_trajectory_stats(path: &Path) -> Result<TrajectoryStats, DataError> 
 /// What [`read_trajectory_identity`] reads of a trajectory file.
 pub(crate) struct TrajectoryIdentity {
     pub(crate) frames: usize,
+    pub(crate) particles: usize,
     pub(crate) dim: usize,
     pub(crate) seed: u64,
     pub(crate) index: usize,
 }
 
-/// The frame count and dimension of a trajectory file's positions (from the `.npy` header
+/// The frame count, particle count and dimension of a trajectory file's positions (from the `.npy` header
 /// only; the positions are not read, nor their CRC-32 checked) and its stored seed and index
 /// (two small members, CRC-checked).
 pub(crate) fn read_trajectory_identity(path: &Path) -> Result<TrajectoryIdentity, DataError> {
     let mut npz = NpzReader::open(path)?;
     let header = npz.header("position")?;
-    let (frames, dim) = match header.shape[..] {
-        [frames, _particles, dim] if header.descr == "<f4" => (frames, dim),
+    let (frames, particles, dim) = match header.shape[..] {
+        [frames, particles, dim] if header.descr == "<f4" => (frames, particles, dim),
         _ => {
             return Err(DataError::invalid(
                 path,
@@ -366,6 +367,7 @@ pub(crate) fn read_trajectory_identity(path: &Path) -> Result<TrajectoryIdentity
         .map_err(|_| DataError::invalid(path, format!("'index' is negative ({index})")))?;
     Ok(TrajectoryIdentity {
         frames,
+        particles,
         dim,
         seed,
         index,
