@@ -123,7 +123,7 @@ mod tests {
     fn byte_counts_read_well() {
         assert_eq!(format_bytes(512), "512 B");
         assert_eq!(format_bytes(3 << 30), "3.0 GiB");
-        assert_eq!(format_bytes(1u128 << 80), "1.0e6 TiB");
+        assert_eq!(format_bytes(1u128 << 60), "1.0e6 TiB");
     }
 
     #[test]

@@ -14,7 +14,7 @@ use proptest::prelude::*;
 use proptest::test_runner::{Config, TestCaseError, TestRunner};
 
 /// Inputs per parser: the four together run in a few seconds in a debug build.
-const CASES: u32 = 600;
+const CASES: u32 = 2500;
 /// The longest any one input may take to be parsed and checked.
 const TIME_BOUND: Duration = Duration::from_secs(5);
 

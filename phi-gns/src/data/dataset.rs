@@ -20,6 +20,9 @@ use super::{
 /// let mut metadata = Metadata::new(2);
 /// metadata.sequence_length = 1;
 /// metadata.splits.insert("train".into(), 1);
+/// // A train split needs its statistics (all zero would normalise nothing).
+/// metadata.vel_std = vec![1e-3; 2];
+/// metadata.acc_std = vec![1e-4; 2];
 /// let traj = Trajectory::new(2, vec![0.5, 0.5, 0.5, 0.4], vec![LIQUID], 7, 0)?;
 /// let path = Dataset::trajectory_path(&dir, "train", 0);
 /// std::fs::create_dir_all(path.parent().unwrap()).unwrap();
