@@ -739,11 +739,12 @@ impl<B: LatticeKernels> FlipSimulation<B> {
             .zip(&self.params.gravity)
             .zip(&dx)
             .map(|((&v, &g), &dx)| {
-                let budget = target * dx;
-                let g = g.abs();
+                // In f64: v² of a fast (finite) f32 velocity would overflow f32.
+                let (v, g) = (f64::from(v), f64::from(g.abs()));
+                let budget = f64::from(target) * f64::from(dx);
                 let denominator = v + (v * v + 4.0 * g * budget).sqrt();
                 if denominator > 0.0 {
-                    2.0 * budget / denominator
+                    (2.0 * budget / denominator) as f32
                 } else {
                     f32::INFINITY
                 }
