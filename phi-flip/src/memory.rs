@@ -95,9 +95,10 @@ impl Scene {
     /// [`memory_estimate`](Self::memory_estimate), refused when it exceeds `limit` bytes.
     ///
     /// # Errors
-    /// [`FlipError::Scene`] naming `origin`, the key whose request weighs most
-    /// (`domain.resolution`, `simulation.particles_per_cell` or `simulation.steps` for the
-    /// recorded frames), the estimate and the limit.
+    /// [`FlipError::Scene`] naming `origin`, the key to change (`domain.resolution` when the
+    /// grid alone exceeds the limit, `simulation.particles_per_cell` when one frame of particles
+    /// does, else the largest share, `simulation.steps` for the recorded frames), the estimate and
+    /// the limit.
     pub fn check_memory(
         &self,
         origin: &str,
@@ -133,10 +134,20 @@ impl Scene {
                 ),
             ),
         ];
-        let (_, key, what) = shares
-            .iter()
-            .max_by(|a, b| a.0.total_cmp(&b.0))
-            .expect("three shares");
+        // The key to change: the grid when it alone is too large, the particles when one frame
+        // of them is, else whichever share weighs most.
+        let one_frame = estimate.particle_bytes
+            + estimate.recorded_bytes / recorded_frames.max(1) as f64;
+        let (_, key, what) = if estimate.grid_bytes > limit {
+            &shares[0]
+        } else if one_frame > limit {
+            &shares[1]
+        } else {
+            shares
+                .iter()
+                .max_by(|a, b| a.0.total_cmp(&b.0))
+                .expect("three shares")
+        };
         Err(FlipError::Scene {
             path: origin.into(),
             key: (*key).into(),
@@ -214,7 +225,7 @@ mod tests {
             "{e}"
         );
         let s = scene("[8, 8]", 1_000_000_000, "");
-        let e = s.check_memory("t.toml", 10, 0, 0.0, 1e9).unwrap_err().to_string();
+        let e = s.check_memory("t.toml", 10, 11, 24.0, 1e9).unwrap_err().to_string();
         assert!(e.contains("simulation.particles_per_cell"), "{e}");
         let s = scene("[8, 8]", 8, "");
         let e = s
