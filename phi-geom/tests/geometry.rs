@@ -1193,7 +1193,10 @@ mod nesting {
             tol,
         );
         let pushed = g.push(&p, PushDirection::Outward, 0.0).unwrap().to_vec();
-        let want = plain.push(&p, PushDirection::Outward, 0.0).unwrap().to_vec();
+        let want = plain
+            .push(&p, PushDirection::Outward, 0.0)
+            .unwrap()
+            .to_vec();
         assert_close(&pushed, &want, push_tol);
         let pushed = g.push(&p, PushDirection::Inward, 0.0).unwrap().to_vec();
         let want = plain.push(&p, PushDirection::Inward, 0.0).unwrap().to_vec();
@@ -1240,9 +1243,8 @@ mod nesting {
         let mut g = ball.clone();
         let mut error = None;
         for _ in 0..20 {
-            let u = Geometry::union(vec![g.clone(), ball.clone()]).and_then(|u| {
-                u.rotated(Rotation::degrees(10.0))
-            });
+            let u = Geometry::union(vec![g.clone(), ball.clone()])
+                .and_then(|u| u.rotated(Rotation::degrees(10.0)));
             match u {
                 Ok(next) => g = next,
                 Err(e) => {

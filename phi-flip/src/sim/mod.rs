@@ -132,7 +132,7 @@ impl FlipParams {
         {
             return invalid("cfl", format!("must be positive and finite, got {cfl}"));
         }
-        if !(self.max_cfl > 0.0) {
+        if self.max_cfl.is_nan() || self.max_cfl <= 0.0 {
             return invalid(
                 "max_cfl",
                 format!("must be positive (inf: no limit), got {}", self.max_cfl),
@@ -688,8 +688,10 @@ impl<B: LatticeKernels> FlipSimulation<B> {
         let velocities = next.velocities.host_values();
         check_finite(&after, &velocities, &next, step)?;
         let particle_speed = largest_speed_per_axis(&velocities, self.domain.dim());
-        let cfl = self.cfl_number(&grid_speed, h).max(self.cfl_number(&particle_speed, h));
-        if !(cfl <= self.params.max_cfl) {
+        let cfl = self
+            .cfl_number(&grid_speed, h)
+            .max(self.cfl_number(&particle_speed, h));
+        if cfl.is_nan() || cfl > self.params.max_cfl {
             return Err(FlipError::Unstable {
                 step,
                 cfl,
@@ -758,7 +760,7 @@ impl<B: LatticeKernels> FlipSimulation<B> {
             longest
         };
         let needed = stats.substeps as f64 + (f64::from(remaining) / f64::from(h)).ceil();
-        if !(h > 0.0) || needed > self.params.max_substeps as f64 {
+        if h.is_nan() || h <= 0.0 || needed > self.params.max_substeps as f64 {
             let cfl = self.cfl_number(&speed, self.params.dt);
             return Err(FlipError::Unstable {
                 step,
