@@ -3,11 +3,19 @@
 
 use anyhow::{Result, bail};
 
-/// The machine's total memory in bytes, `None` where it cannot be read.
+/// The machine's total memory in bytes (`MemTotal` of `/proc/meminfo`), `None` where it cannot
+/// be read (then no ceiling applies unless one is given).
 pub fn machine_memory() -> Option<u64> {
-    let mut system = sysinfo::System::new();
-    system.refresh_memory();
-    Some(system.total_memory()).filter(|&m| m > 0)
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemTotal:"))?;
+    let mut words = line.split_whitespace().skip(1);
+    let value: u64 = words.next()?.parse().ok()?;
+    let factor = match words.next() {
+        Some("kB") => 1024,
+        Some("B") | None => 1,
+        Some(_) => return None,
+    };
+    value.checked_mul(factor).filter(|&m| m > 0)
 }
 
 /// Parses a size in bytes: a number with an optional unit, `B`, `K`/`KiB`, `M`/`MiB`,

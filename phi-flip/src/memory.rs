@@ -75,7 +75,11 @@ impl Scene {
                 })
                 .product()
         };
-        let mut particles: f64 = self.liquids.iter().map(|l| cells_in(&l.geometry) * ppc).sum();
+        let mut particles: f64 = self
+            .liquids
+            .iter()
+            .map(|l| cells_in(&l.geometry) * ppc)
+            .sum();
         for inflow in &self.inflows {
             let active = inflow.until_step.map_or(steps, |u| u.min(steps)) as f64;
             let emissions = (active / inflow.every as f64).ceil();
@@ -87,7 +91,9 @@ impl Scene {
             cells,
             particles,
             grid_bytes: 4.0 * GRID_FLOATS_PER_CELL * d_f * cells,
-            particle_bytes: 4.0 * (PARTICLE_FLOATS_PER_STEP * d_f + 3.0 * d_f * corners) * particles,
+            particle_bytes: 4.0
+                * (PARTICLE_FLOATS_PER_STEP * d_f + 3.0 * d_f * corners)
+                * particles,
             recorded_bytes: recorded_frames as f64 * particles * bytes_per_recorded_particle,
         }
     }
@@ -95,9 +101,10 @@ impl Scene {
     /// [`memory_estimate`](Self::memory_estimate), refused when it exceeds `limit` bytes.
     ///
     /// # Errors
-    /// [`FlipError::Scene`] naming `origin`, the key whose request weighs most
-    /// (`domain.resolution`, `simulation.particles_per_cell` or `simulation.steps` for the
-    /// recorded frames), the estimate and the limit.
+    /// [`FlipError::Scene`] naming `origin`, the key to change (`domain.resolution` when the
+    /// grid alone exceeds the limit, `simulation.particles_per_cell` when one frame of particles
+    /// does, else the largest share, `simulation.steps` for the recorded frames), the estimate and
+    /// the limit.
     pub fn check_memory(
         &self,
         origin: &str,
@@ -133,10 +140,20 @@ impl Scene {
                 ),
             ),
         ];
-        let (_, key, what) = shares
-            .iter()
-            .max_by(|a, b| a.0.total_cmp(&b.0))
-            .expect("three shares");
+        // The key to change: the grid when it alone is too large, the particles when one frame
+        // of them is, else whichever share weighs most.
+        let one_frame =
+            estimate.particle_bytes + estimate.recorded_bytes / recorded_frames.max(1) as f64;
+        let (_, key, what) = if estimate.grid_bytes > limit {
+            &shares[0]
+        } else if one_frame > limit {
+            &shares[1]
+        } else {
+            shares
+                .iter()
+                .max_by(|a, b| a.0.total_cmp(&b.0))
+                .expect("three shares")
+        };
         Err(FlipError::Scene {
             path: origin.into(),
             key: (*key).into(),
@@ -208,13 +225,19 @@ mod tests {
     #[test]
     fn too_large_requests_name_the_key() {
         let s = scene("[100000, 100000]", 1, "");
-        let e = s.check_memory("t.toml", 10, 0, 0.0, 1e9).unwrap_err().to_string();
+        let e = s
+            .check_memory("t.toml", 10, 0, 0.0, 1e9)
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("t.toml") && e.contains("domain.resolution") && e.contains("limit"),
             "{e}"
         );
         let s = scene("[8, 8]", 1_000_000_000, "");
-        let e = s.check_memory("t.toml", 10, 0, 0.0, 1e9).unwrap_err().to_string();
+        let e = s
+            .check_memory("t.toml", 10, 11, 24.0, 1e9)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("simulation.particles_per_cell"), "{e}");
         let s = scene("[8, 8]", 8, "");
         let e = s

@@ -517,7 +517,7 @@ impl Scene {
             ));
         }
         if let Some(c) = s.max_cfl
-            && !(c > 0.0)
+            && (c.is_nan() || c <= 0.0)
         {
             return Err(error(
                 "simulation.max_cfl".into(),

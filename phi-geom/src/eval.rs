@@ -266,9 +266,11 @@ impl Geometry {
                 // The inner push returns the points it does not move bit for bit, so the moved
                 // ones are those that changed: no second pass over the inner tree (which made
                 // nested rotations quadratic), and the unmoved points skip the round trip.
-                let moved = pushed
-                    .compare(CompareOp::NotEqual, &local)?
-                    .reduce_axis(ReduceOp::Max, 1, true)?;
+                let moved = pushed.compare(CompareOp::NotEqual, &local)?.reduce_axis(
+                    ReduceOp::Max,
+                    1,
+                    true,
+                )?;
                 Tensor::select(&moved, &frame.to_world(&pushed)?, p)
             }
             Geometry::Union(_) => match direction {

@@ -731,9 +731,7 @@ impl Geometry {
                     AxisBox::unchecked(lower, upper)
                 };
                 Summary {
-                    scale: own_scale(&bounds)
-                        .max(finite_max(&pivot))
-                        .max(inner.scale),
+                    scale: own_scale(&bounds).max(finite_max(&pivot)).max(inner.scale),
                     center,
                     bounds,
                 }

@@ -56,7 +56,10 @@ fn a_failing_run_keeps_what_it_made() {
     assert_eq!(run["frames"], 3);
     assert_eq!(run["trajectory_frames"], 3);
     let failure = run["failure"].as_str().unwrap();
-    assert!(failure.contains("step 2") && failure.contains("CFL"), "{failure}");
+    assert!(
+        failure.contains("step 2") && failure.contains("CFL"),
+        "{failure}"
+    );
     let gif = std::fs::read(out.join("simulation.gif")).unwrap();
     assert_eq!(gif.last(), Some(&0x3B), "the GIF has no trailer");
     let _ = std::fs::remove_dir_all(dir);
@@ -87,7 +90,10 @@ fn blown_up_scenes_fail_and_sub_step_with_the_cfl_key() {
         .unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(!output.status.success(), "{stderr}");
-    assert!(stderr.contains("step 0") && stderr.contains("CFL number"), "{stderr}");
+    assert!(
+        stderr.contains("step 0") && stderr.contains("CFL number"),
+        "{stderr}"
+    );
     assert_eq!(run_json(&out)["complete"], false);
 
     std::fs::write(&blown, scene("cfl = 1.0")).unwrap();
@@ -104,7 +110,12 @@ fn blown_up_scenes_fail_and_sub_step_with_the_cfl_key() {
     assert!(run["substeps"].as_u64().unwrap() > 100, "{run}");
     assert!(run["cfl_max"].as_f64().unwrap() < 2.0, "{run}");
     let arrays = read_npz(out.join("trajectory.npz")).unwrap();
-    let p = arrays.iter().find(|(n, _)| n == "positions").unwrap().1.clone();
+    let p = arrays
+        .iter()
+        .find(|(n, _)| n == "positions")
+        .unwrap()
+        .1
+        .clone();
     assert!(p.as_f32().unwrap().iter().all(|x| x.is_finite()));
     let _ = std::fs::remove_dir_all(dir);
 }
@@ -134,8 +145,15 @@ fn simulate_does_not_overwrite_silently() {
     let output = simulate("2", false);
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(!output.status.success());
-    assert!(stderr.contains("not empty") && stderr.contains("--force"), "{stderr}");
-    assert_eq!(run_json(&out)["steps"], 4, "the refused run touched the old one");
+    assert!(
+        stderr.contains("not empty") && stderr.contains("--force"),
+        "{stderr}"
+    );
+    assert_eq!(
+        run_json(&out)["steps"],
+        4,
+        "the refused run touched the old one"
+    );
     ok(simulate("2", true));
     assert_eq!(run_json(&out)["steps"], 2);
     assert!(out.join("frames/frame_00002.png").is_file());
@@ -144,7 +162,10 @@ fn simulate_does_not_overwrite_silently() {
         "a frame of the old run is left"
     );
 
-    for (name, expected) in [("metadata.json", "dataset"), ("notes.txt", "does not write")] {
+    for (name, expected) in [
+        ("metadata.json", "dataset"),
+        ("notes.txt", "does not write"),
+    ] {
         let foreign = dir.join(format!("foreign-{name}"));
         std::fs::create_dir_all(&foreign).unwrap();
         std::fs::write(foreign.join(name), "{}").unwrap();
@@ -160,7 +181,12 @@ fn simulate_does_not_overwrite_silently() {
         assert!(!output.status.success());
         assert!(stderr.contains(expected), "{stderr}");
         let left: Vec<_> = std::fs::read_dir(&foreign).unwrap().collect();
-        assert_eq!(left.len(), 1, "phi simulate wrote into {}", foreign.display());
+        assert_eq!(
+            left.len(),
+            1,
+            "phi simulate wrote into {}",
+            foreign.display()
+        );
     }
     let _ = std::fs::remove_dir_all(dir);
 }
@@ -172,9 +198,24 @@ fn sizes_beyond_the_memory_limit_are_refused() {
     let dir = scratch("memory");
     let out = dir.join("run");
     let cases = [
-        ("resolution = [100000, 100000]", "particles_per_cell = 8", "domain.resolution", None),
-        ("resolution = [32, 32]", "particles_per_cell = 1000000000", "simulation.particles_per_cell", None),
-        ("resolution = [32, 32]", "particles_per_cell = 8", "simulation.steps", Some("1MiB")),
+        (
+            "resolution = [100000, 100000]",
+            "particles_per_cell = 8",
+            "domain.resolution",
+            None,
+        ),
+        (
+            "resolution = [32, 32]",
+            "particles_per_cell = 1000000000",
+            "simulation.particles_per_cell",
+            None,
+        ),
+        (
+            "resolution = [32, 32]",
+            "particles_per_cell = 8",
+            "simulation.steps",
+            Some("1MiB"),
+        ),
     ];
     for (resolution, ppc, key, limit) in cases {
         let scene = dir.join("big.toml");

@@ -132,7 +132,7 @@ impl FlipParams {
         {
             return invalid("cfl", format!("must be positive and finite, got {cfl}"));
         }
-        if !(self.max_cfl > 0.0) {
+        if self.max_cfl.is_nan() || self.max_cfl <= 0.0 {
             return invalid(
                 "max_cfl",
                 format!("must be positive (inf: no limit), got {}", self.max_cfl),
@@ -688,8 +688,10 @@ impl<B: LatticeKernels> FlipSimulation<B> {
         let velocities = next.velocities.host_values();
         check_finite(&after, &velocities, &next, step)?;
         let particle_speed = largest_speed_per_axis(&velocities, self.domain.dim());
-        let cfl = self.cfl_number(&grid_speed, h).max(self.cfl_number(&particle_speed, h));
-        if !(cfl <= self.params.max_cfl) {
+        let cfl = self
+            .cfl_number(&grid_speed, h)
+            .max(self.cfl_number(&particle_speed, h));
+        if cfl.is_nan() || cfl > self.params.max_cfl {
             return Err(FlipError::Unstable {
                 step,
                 cfl,
@@ -739,11 +741,12 @@ impl<B: LatticeKernels> FlipSimulation<B> {
             .zip(&self.params.gravity)
             .zip(&dx)
             .map(|((&v, &g), &dx)| {
-                let budget = target * dx;
-                let g = g.abs();
+                // In f64: v² of a fast (finite) f32 velocity would overflow f32.
+                let (v, g) = (f64::from(v), f64::from(g.abs()));
+                let budget = f64::from(target) * f64::from(dx);
                 let denominator = v + (v * v + 4.0 * g * budget).sqrt();
                 if denominator > 0.0 {
-                    2.0 * budget / denominator
+                    (2.0 * budget / denominator) as f32
                 } else {
                     f32::INFINITY
                 }
@@ -757,7 +760,7 @@ impl<B: LatticeKernels> FlipSimulation<B> {
             longest
         };
         let needed = stats.substeps as f64 + (f64::from(remaining) / f64::from(h)).ceil();
-        if !(h > 0.0) || needed > self.params.max_substeps as f64 {
+        if h.is_nan() || h <= 0.0 || needed > self.params.max_substeps as f64 {
             let cfl = self.cfl_number(&speed, self.params.dt);
             return Err(FlipError::Unstable {
                 step,

@@ -19,7 +19,9 @@ fn scene(simulation: &str) -> Scene {
 
 /// Runs the scene; returns the positions of each frame or the error with the steps done.
 fn run(scene: &Scene) -> (Vec<Vec<f32>>, Option<FlipError>, Vec<phi_flip::StepStats>) {
-    let setup = scene.build::<Nd>("blowup.toml", &Default::default()).unwrap();
+    let setup = scene
+        .build::<Nd>("blowup.toml", &Default::default())
+        .unwrap();
     let mut p = setup.particles;
     let mut frames = vec![p.positions.to_vec()];
     let mut stats = Vec::new();
@@ -77,7 +79,10 @@ fn the_cfl_key_sub_steps_a_blown_up_scene_into_a_finite_run() {
     let (frames, error, stats) = run(&scene("dt = 5\nsteps = 2\ncfl = 1.0"));
     assert!(error.is_none(), "{}", error.unwrap());
     let last = frames.last().unwrap();
-    assert!(last.iter().all(|x| x.is_finite() && (0.0..=16.0).contains(x)));
+    assert!(
+        last.iter()
+            .all(|x| x.is_finite() && (0.0..=16.0).contains(x))
+    );
     for s in &stats {
         println!("sub-steps {} CFL {:.3}", s.substeps, s.cfl);
         assert!(s.substeps > 10, "{} sub-steps", s.substeps);
@@ -110,7 +115,10 @@ fn small_cfl_sub_steps_agree_with_small_fixed_steps() {
     let (fine, e3, _) = run(&block("dt = 0.01\nsteps = 120"));
     assert!(e1.is_none() && e2.is_none() && e3.is_none());
     let total: usize = stats.iter().map(|s| s.substeps).sum();
-    println!("sub-steps per step: {:?}", stats.iter().map(|s| s.substeps).collect::<Vec<_>>());
+    println!(
+        "sub-steps per step: {:?}",
+        stats.iter().map(|s| s.substeps).collect::<Vec<_>>()
+    );
     assert!(total > 30, "{total} sub-steps");
     let mean_y = |p: &[f32]| p.chunks(2).map(|q| q[1]).sum::<f32>() / (p.len() / 2) as f32;
     let (c, s, f) = (
@@ -121,7 +129,10 @@ fn small_cfl_sub_steps_agree_with_small_fixed_steps() {
     // Free fall over 1.2 s: 22 − ½ 9.81 1.2² = 14.94 for the centre of mass.
     println!("centre of mass: coarse {c:.3}, sub-stepped {s:.3}, fine {f:.3}, exact 14.937");
     assert!((s - f).abs() < 0.1, "sub-stepped {s} vs fine {f}");
-    assert!((c - f).abs() > 5.0 * (s - f).abs(), "coarse {c} sub {s} fine {f}");
+    assert!(
+        (c - f).abs() > 5.0 * (s - f).abs(),
+        "coarse {c} sub {s} fine {f}"
+    );
     assert!((f - 14.937).abs() < 0.15, "fine {f}");
 }
 
