@@ -6,8 +6,8 @@ use phi::backends::BackendKind;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use phi::dataset::memory::shorten;
 use phi::demo::{self, DemoReport};
+use phi::memory::shorten;
 use phi::phi_flip::Scene;
 use phi::simulate::{SimulateOptions, simulate};
 use phi::{with_autodiff_backend, with_backend};

@@ -28,8 +28,8 @@
 //!
 //! # Memory
 //! Before anything is allocated, the scene's needs are estimated ([`phi_flip::memory`], plus the
-//! recorded frames) and a run that needs more than the limit (`--memory-limit`, default the
-//! machine's memory) is refused, naming the key.
+//! recorded frames) and a run that needs more than the limit (`--memory-limit`, else
+//! `PHI_MEMORY_LIMIT`, else the machine's memory) is refused, naming the key.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -139,7 +139,10 @@ pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> 
     let steps = options.steps.unwrap_or(scene.simulation.steps);
     let limit = match options.memory_limit {
         Some(limit) => limit as f64,
-        None => crate::memory::machine_memory().map_or(f64::INFINITY, |m| m as f64),
+        None => match crate::memory::memory_limit()? {
+            u64::MAX => f64::INFINITY,
+            limit => limit as f64,
+        },
     };
     let apic = scene.simulation.scheme == phi_flip::Scheme::Apic;
     scene.check_memory(

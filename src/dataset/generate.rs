@@ -26,8 +26,8 @@ use super::manifest::{
     GeneratorConfig, MANIFEST, Manifest, Shard, read_generator, read_manifest,
     write_dataset_metadata, write_manifest,
 };
-use super::memory::check_memory;
 use super::{Split, TEST_SCENES, check_dir, position_scale, simulate_trajectory, trajectory_seed};
+use crate::memory::check_memory;
 
 /// What `phi dataset generate` does.
 #[derive(Debug, Clone)]

@@ -17,7 +17,6 @@ pub mod cli;
 pub mod export;
 pub mod generate;
 pub mod manifest;
-pub mod memory;
 pub mod merge;
 pub mod render;
 pub mod stats;

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use phi_gns::data::{Dataset, LIQUID, METADATA_FILE, Trajectory};
 
-use super::memory::check_memory;
+use crate::memory::check_memory;
 use rayon::prelude::*;
 
 use crate::output::{RgbImage, write_png};
