@@ -415,9 +415,11 @@ fn apic_backends_agree_over_ten_steps() {
     let largest_c = reference[9].2.iter().fold(0.0f32, |m, c| m.max(c.abs()));
     println!("ndarray: particles moved up to {moved:.2} cells, |C| up to {largest_c:.2} /s");
     assert!(moved > 1.0 && largest_c > 1.0);
-    let others: Vec<(&str, Vec<Frame>)> = vec![("burn", apic_run::<Burn>(10))];
-    #[cfg(feature = "tch")]
-    others.push(("tch", apic_run::<phi_core::backend::tch::Tch>(10)));
+    let others: Vec<(&str, Vec<Frame>)> = vec![
+        ("burn", apic_run::<Burn>(10)),
+        #[cfg(feature = "tch")]
+        ("tch", apic_run::<phi_core::backend::tch::Tch>(10)),
+    ];
     for (name, frames) in others {
         let mut worst = [0.0f32; 3];
         for (step, (a, b)) in reference.iter().zip(&frames).enumerate() {
