@@ -226,7 +226,7 @@ fn burn_and_tch_take_the_same_training_step() {
             (b_loss - t_loss).abs() <= 1e-5 * b_loss.abs(),
             "{which:?}: {b_loss} vs {t_loss}"
         );
-        let (b, t): (Parameters<Burn>, Parameters<Tch>) =
+        let (b, t): (phi_gns::model::Parameters<Burn>, phi_gns::model::Parameters<Tch>) =
             (burn.params().clone(), tch.params().clone());
         for ((name, x), (_, y)) in host_params(&b).iter().zip(host_params(&t).iter()) {
             for (a, c) in x.iter().zip(y) {
