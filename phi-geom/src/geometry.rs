@@ -591,6 +591,8 @@ impl Geometry {
         if depth > MAX_DEPTH {
             return Err(too_deep(depth));
         }
+        // Dimensions first: the cost estimate compares the members' bounding boxes.
+        self.validate_tree()?;
         if !matches!(self, Geometry::Box(_) | Geometry::Sphere(_)) {
             let cost = self.push_cost();
             if cost > MAX_PUSH_COST {
@@ -605,7 +607,7 @@ impl Geometry {
                 ));
             }
         }
-        self.validate_tree()
+        Ok(())
     }
 
     /// [`validate`](Self::validate) without the checks of the whole tree's size.
