@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use phi_io::npz::{NpyArray, write_npz_streamed};
+use phi_io::npz::{NpyArray, NpzWriter, write_npz_streamed};
 
 use super::trajectory::{read_trajectory_and_stats, read_trajectory_identity};
 use super::{
@@ -322,19 +322,33 @@ pub fn export_npz(
     split: &str,
     out_file: impl AsRef<Path>,
 ) -> Result<usize, DataError> {
+    write_split_npz(dataset, split, out_file.as_ref(), |npz, traj| {
+        let i = traj.index;
+        let position = NpyArray {
+            shape: vec![traj.frames, traj.particles, traj.dim],
+            data: traj.position.into(),
+        };
+        npz.add(&format!("trajectory_{i}_position"), &position)?;
+        let types = NpyArray::from_vec(traj.particle_type);
+        npz.add(&format!("trajectory_{i}_particle_type"), &types)?;
+        Ok(())
+    })
+}
+
+/// Streams `split` of `dataset` into one `.npz` archive at `out_file`, written atomically:
+/// `entries` adds each trajectory's arrays, in index order, with one trajectory in memory at a
+/// time. Returns the number of trajectories.
+pub(crate) fn write_split_npz(
+    dataset: &Dataset,
+    split: &str,
+    out_file: &Path,
+    mut entries: impl FnMut(&mut NpzWriter<'_>, Trajectory) -> Result<(), DataError>,
+) -> Result<usize, DataError> {
     let reader = dataset.split(split)?;
     let mut count = 0;
     write_npz_streamed(out_file, |npz| {
         for traj in reader {
-            let traj = traj?;
-            let i = traj.index;
-            let position = NpyArray {
-                shape: vec![traj.frames, traj.particles, traj.dim],
-                data: traj.position.into(),
-            };
-            npz.add(&format!("trajectory_{i}_position"), &position)?;
-            let types = NpyArray::from_vec(traj.particle_type);
-            npz.add(&format!("trajectory_{i}_particle_type"), &types)?;
+            entries(npz, traj?)?;
             count += 1;
         }
         Ok::<(), DataError>(())

@@ -18,10 +18,11 @@
 
 use std::path::Path;
 
-use phi_io::npz::{NpyArray, write_npz_streamed};
+use phi_io::npz::NpyArray;
 use phi_io::{IoError, write_atomic};
 use serde::Serialize;
 
+use super::dataset::write_split_npz;
 use super::{DataError, Dataset, LIQUID, Metadata, OBSTACLE, Trajectory};
 
 /// gns's `KINEMATIC_PARTICLE_ID`: particles that follow the ground truth.
@@ -126,23 +127,16 @@ pub fn export_gns_split(
     out_file: &Path,
     on_trajectory: &mut dyn FnMut(),
 ) -> Result<usize, DataError> {
-    let reader = dataset.split(split)?;
-    let mut count = 0;
-    write_npz_streamed(out_file, |npz| {
-        for traj in reader {
-            let traj = traj?;
-            let types = map_types(dataset, split, &traj, GNS_KINEMATIC, GNS_WATER)?;
-            let types = NpyArray::from_vec(types);
-            npz.add_object_array(
-                &format!("trajectory_{}", traj.index),
-                &[&positions(&traj), &types],
-            )?;
-            count += 1;
-            on_trajectory();
-        }
-        Ok::<(), DataError>(())
-    })?;
-    Ok(count)
+    write_split_npz(dataset, split, out_file, |npz, traj| {
+        let types = map_types(dataset, split, &traj, GNS_KINEMATIC, GNS_WATER)?;
+        let types = NpyArray::from_vec(types);
+        npz.add_object_array(
+            &format!("trajectory_{}", traj.index),
+            &[&positions(&traj), &types],
+        )?;
+        on_trajectory();
+        Ok(())
+    })
 }
 
 /// Writes every split of `dataset` for gns into `out_dir` (`{split}.npz`, see
@@ -241,22 +235,15 @@ pub fn export_lagrangebench_arrays(
     out_file: &Path,
     on_trajectory: &mut dyn FnMut(),
 ) -> Result<usize, DataError> {
-    let reader = dataset.split(split)?;
-    let mut count = 0;
-    write_npz_streamed(out_file, |npz| {
-        for traj in reader {
-            let traj = traj?;
-            let types = map_types(dataset, split, &traj, LB_SOLID_WALL, LB_FLUID)?;
-            let group = format!("{:05}", traj.index);
-            npz.add(&format!("{group}/position"), &positions(&traj))?;
-            npz.add(
-                &format!("{group}/particle_type"),
-                &NpyArray::from_vec(types),
-            )?;
-            count += 1;
-            on_trajectory();
-        }
-        Ok::<(), DataError>(())
-    })?;
-    Ok(count)
+    write_split_npz(dataset, split, out_file, |npz, traj| {
+        let types = map_types(dataset, split, &traj, LB_SOLID_WALL, LB_FLUID)?;
+        let group = format!("{:05}", traj.index);
+        npz.add(&format!("{group}/position"), &positions(&traj))?;
+        npz.add(
+            &format!("{group}/particle_type"),
+            &NpyArray::from_vec(types),
+        )?;
+        on_trajectory();
+        Ok(())
+    })
 }
