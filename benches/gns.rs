@@ -17,7 +17,7 @@
 mod common;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use phi::dataset::Split;
+use phi::dataset::{Split, TestScenes};
 use phi::dataset::generate::{GenerateOptions, generate};
 use phi::dataset::manifest::Shard;
 use phi_flip::{RandomSceneParams, SceneVariant};
@@ -51,6 +51,8 @@ fn trajectory() -> Trajectory {
         },
         resume: false,
         force: false,
+        scenes: TestScenes::builtin(),
+        position_scale: None,
         progress: false,
     })
     .expect("the bench trajectory simulates");

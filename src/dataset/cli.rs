@@ -2,11 +2,11 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use phi_flip::{RandomSceneParams, SceneVariant};
 
-use super::Split;
+use super::{Split, TestScenes};
 use super::export::{ExportFormat, ExportOptions, export};
 use super::generate::{GenerateOptions, generate};
 use super::manifest::Shard;
@@ -129,6 +129,15 @@ pub struct GenerateArgs {
     /// Delete trajectory files beyond --count instead of refusing to run.
     #[arg(long)]
     pub force: bool,
+    /// Make the test split from the scene files (*.toml) of this folder, in name order, instead
+    /// of the ten built-in ones; they share one domain size and time step, which become the
+    /// dataset's. Only with --split test.
+    #[arg(long, value_name = "DIR")]
+    pub scenes: Option<PathBuf>,
+    /// Stored units per cell [default: 0.8 / the longest side, which maps the domain onto
+    /// [0.1, 0.9]]; 0.025 keeps the thesis' scale (x / 40 + 0.1) on larger domains.
+    #[arg(long, value_name = "S")]
+    pub position_scale: Option<f64>,
 }
 
 /// `phi render`.
@@ -322,6 +331,39 @@ fn run_generate(args: GenerateArgs) -> Result<()> {
         params.steps = steps;
         params.validate("--steps")?;
     }
+    let scenes = match &args.scenes {
+        None => TestScenes::builtin(),
+        Some(dir) => {
+            if splits != [Split::Test] {
+                bail!(
+                    "--scenes {} makes the test split; pass --split test",
+                    dir.display()
+                );
+            }
+            let scenes = TestScenes::from_dir(dir)?;
+            let (resolution, dt) = scenes.domain()?;
+            if let Some(path) = &args.config
+                && (params.resolution != resolution || params.dt != dt)
+            {
+                bail!(
+                    "{}: resolution {:?} and dt {} differ from the scenes of {} ({resolution:?}, \
+                     {dt}); leave them out of the configuration",
+                    path.display(),
+                    params.resolution,
+                    params.dt,
+                    dir.display()
+                );
+            }
+            params.resolution = resolution;
+            params.dt = dt;
+            scenes
+        }
+    };
+    if let Some(scale) = args.position_scale
+        && !(scale.is_finite() && scale > 0.0)
+    {
+        bail!("--position-scale {scale}: the stored units per cell must be a positive number");
+    }
     let options = GenerateOptions {
         out: args.out,
         splits,
@@ -333,6 +375,8 @@ fn run_generate(args: GenerateArgs) -> Result<()> {
         shard: args.shard,
         resume: args.resume,
         force: args.force,
+        scenes,
+        position_scale: args.position_scale,
         progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
     };
     let summary = generate(&options)?;

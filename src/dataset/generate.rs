@@ -26,7 +26,9 @@ use super::manifest::{
     GeneratorConfig, MANIFEST, Manifest, Shard, read_generator, read_manifest,
     write_dataset_metadata, write_manifest,
 };
-use super::{Split, TEST_SCENES, check_dir, position_scale, simulate_trajectory, trajectory_seed};
+use super::{
+    Split, TestScenes, check_dir, position_scale, simulate_trajectory, trajectory_seed,
+};
 use crate::memory::check_memory;
 
 /// What `phi dataset generate` does.
@@ -53,6 +55,10 @@ pub struct GenerateOptions {
     pub resume: bool,
     /// Delete trajectory files beyond this run's count instead of refusing to.
     pub force: bool,
+    /// The test split's scenes.
+    pub scenes: TestScenes,
+    /// Stored units per cell (`None`: 0.8 / the longest side).
+    pub position_scale: Option<f64>,
     /// Show a progress bar.
     pub progress: bool,
 }
@@ -90,14 +96,20 @@ pub fn generate(options: &GenerateOptions) -> Result<GenerateSummary> {
     let started = Instant::now();
     let out = &options.out;
     check_dir(out)?;
-    let config = GeneratorConfig::new(options.variant, options.seed, options.params.clone());
+    let config = GeneratorConfig::new(
+        options.variant,
+        options.seed,
+        options.params.clone(),
+        &options.scenes,
+        options.position_scale,
+    );
     check_compatible(out, &config, options.shard, options.resume)?;
 
     let mut counts = BTreeMap::new();
     for &split in &options.splits {
         let mut count = options.count.unwrap_or(split.default_count());
         if split == Split::Test {
-            count = count.min(TEST_SCENES.len());
+            count = count.min(options.scenes.len());
         }
         counts.insert(split.name().to_string(), count);
     }
@@ -222,7 +234,7 @@ pub fn generate(options: &GenerateOptions) -> Result<GenerateSummary> {
         .num_threads(options.threads.unwrap_or(0))
         .build()
         .context("starting the worker threads")?;
-    let (scale, offset) = position_scale(options.params.resolution);
+    let (scale, offset) = position_scale(options.params.resolution, options.position_scale);
     let particles: Vec<usize> = pool.install(|| {
         jobs.par_iter()
             .map(|job| {
@@ -373,6 +385,7 @@ fn make_trajectory(job: &Job, options: &GenerateOptions, scale: f32, offset: f32
         job.seed,
         &options.params,
         options.variant,
+        &options.scenes,
         options.params.steps,
     )?;
     let t = raw.trajectory;

@@ -15,7 +15,7 @@ use phi_gns::data::{
 use phi_io::write_atomic;
 use serde::{Deserialize, Serialize};
 
-use super::{Split, TEST_SCENES};
+use super::{Split, TestScenes};
 
 /// The name of the generation manifest in a dataset directory.
 pub const MANIFEST: &str = "generator.json";
@@ -82,11 +82,24 @@ pub struct GeneratorConfig {
     pub params: RandomSceneParams,
     /// The test scenes, by file name.
     pub test_scenes: Vec<String>,
+    /// The CRC-32 of the test scenes' names and texts when they come from a folder
+    /// (`--scenes`); absent for the built-in ones.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_scenes_crc32: Option<u32>,
+    /// Stored units per cell (`--position-scale`); absent: 0.8 / the longest side.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_scale: Option<f64>,
 }
 
 impl GeneratorConfig {
     /// The configuration of a run.
-    pub fn new(variant: SceneVariant, seed: u64, params: RandomSceneParams) -> Self {
+    pub fn new(
+        variant: SceneVariant,
+        seed: u64,
+        params: RandomSceneParams,
+        scenes: &TestScenes,
+        position_scale: Option<f64>,
+    ) -> Self {
         Self {
             generator: format!("phi dataset generate {}", env!("CARGO_PKG_VERSION")),
             variant,
@@ -96,7 +109,9 @@ impl GeneratorConfig {
                 .map(|s| (s.name().to_string(), s.seed(seed)))
                 .collect(),
             params,
-            test_scenes: TEST_SCENES.iter().map(|(n, _)| n.to_string()).collect(),
+            test_scenes: scenes.names(),
+            test_scenes_crc32: (!scenes.builtin).then(|| scenes.crc32()),
+            position_scale,
         }
     }
 
@@ -197,7 +212,7 @@ pub fn write_dataset_metadata(
     metadata.dt = params.dt.to_string().parse()?;
     // In f64 from the same decimals as `position_scale` (0.8 / 32 = 0.025, offset 0.1).
     let longest = params.resolution[0].max(params.resolution[1]) as f64;
-    let (scale, offset) = (0.8 / longest, 0.1);
+    let (scale, offset) = (config.position_scale.unwrap_or(0.8 / longest), 0.1);
     metadata.position_scale = scale;
     metadata.position_offset = offset;
     metadata.bounds = params

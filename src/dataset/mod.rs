@@ -134,9 +134,170 @@ pub struct RawTrajectory {
     pub seed: u64,
 }
 
+/// The scenes of a test split: the ten built-in ones of `scenes/test/`, or the scene files of a
+/// folder (`phi dataset generate --scenes DIR`), in file-name order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TestScenes {
+    /// Where the scenes come from in messages: `scenes/test` or the folder given.
+    pub origin: String,
+    /// `(file name, TOML text)` per scene.
+    pub files: Vec<(String, String)>,
+    /// Whether these are the built-in scenes.
+    pub builtin: bool,
+}
+
+impl TestScenes {
+    /// The ten scenes of `scenes/test/`, compiled into the binary.
+    pub fn builtin() -> Self {
+        Self {
+            origin: "scenes/test".into(),
+            files: TEST_SCENES
+                .iter()
+                .map(|(name, text)| (name.to_string(), text.to_string()))
+                .collect(),
+            builtin: true,
+        }
+    }
+
+    /// The `*.toml` files of `dir`, sorted by name, each parsed and checked for a dataset
+    /// ([`TestScenes::scene`]); they must share one domain size and time step.
+    ///
+    /// # Errors
+    /// A folder that cannot be read or holds no scene file, an invalid scene (naming the file),
+    /// scenes of different domain sizes or time steps.
+    pub fn from_dir(dir: &Path) -> Result<Self> {
+        let mut names = Vec::new();
+        for entry in std::fs::read_dir(dir).with_context(|| format!("reading {}", dir.display()))? {
+            let entry = entry.with_context(|| format!("listing {}", dir.display()))?;
+            let path = entry.path();
+            if path.extension().is_some_and(|e| e == "toml") && path.is_file() {
+                names.push(path);
+            }
+        }
+        names.sort();
+        if names.is_empty() {
+            bail!("{} holds no scene files (*.toml)", dir.display());
+        }
+        let mut files = Vec::new();
+        for path in names {
+            let text = std::fs::read_to_string(&path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            let name = path
+                .file_name()
+                .and_then(|n| n.to_str())
+                .with_context(|| format!("{}: the file name is not UTF-8", path.display()))?;
+            files.push((name.to_string(), text));
+        }
+        let scenes = Self {
+            origin: dir.display().to_string(),
+            files,
+            builtin: false,
+        };
+        let first = scenes.scene(0, SceneVariant::Obstacles)?;
+        for index in 1..scenes.len() {
+            let scene = scenes.scene(index, SceneVariant::Obstacles)?;
+            for (key, a, b) in [
+                (
+                    "domain.resolution",
+                    format!("{:?}", first.domain.resolution),
+                    format!("{:?}", scene.domain.resolution),
+                ),
+                (
+                    "simulation.dt",
+                    first.simulation.dt.to_string(),
+                    scene.simulation.dt.to_string(),
+                ),
+            ] {
+                if a != b {
+                    bail!(
+                        "{}: {key} is {b}, but {} has {a}; the scenes of one dataset share \
+                         their domain size and time step",
+                        scenes.path(index),
+                        scenes.path(0)
+                    );
+                }
+            }
+        }
+        Ok(scenes)
+    }
+
+    /// How many scenes there are.
+    pub fn len(&self) -> usize {
+        self.files.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.files.is_empty()
+    }
+
+    /// The file names.
+    pub fn names(&self) -> Vec<String> {
+        self.files.iter().map(|(n, _)| n.clone()).collect()
+    }
+
+    /// `origin/name` of scene `index`.
+    pub fn path(&self, index: usize) -> String {
+        format!("{}/{}", self.origin, self.files[index].0)
+    }
+
+    /// The domain size and time step the scenes share (the first scene's).
+    ///
+    /// # Errors
+    /// An invalid first scene.
+    pub fn domain(&self) -> Result<([usize; 2], f32)> {
+        let scene = self.scene(0, SceneVariant::Obstacles)?;
+        let r = &scene.domain.resolution;
+        Ok(([r[0], r[1]], scene.simulation.dt))
+    }
+
+    /// The CRC-32 of every name and text, which decides the files of a folder's scenes.
+    pub fn crc32(&self) -> u32 {
+        let mut hasher = crc32fast::Hasher::new();
+        for (name, text) in &self.files {
+            for part in [name.as_bytes(), b"\0", text.as_bytes(), b"\0"] {
+                hasher.update(part);
+            }
+        }
+        hasher.finalize()
+    }
+
+    /// Scene `index`, checked for the dataset (2D, no inflows), with the wall ring added in the
+    /// `walls` variant.
+    ///
+    /// # Errors
+    /// An index past the scenes, an invalid scene file (naming it).
+    pub fn scene(&self, index: usize, variant: SceneVariant) -> Result<Scene> {
+        let Some((_, text)) = self.files.get(index) else {
+            bail!("{} holds {} test scenes, not {}", self.origin, self.len(), index + 1);
+        };
+        let origin = self.path(index);
+        let mut scene = Scene::from_toml(text, &origin)?;
+        if scene.dim() != 2 || !scene.inflows.is_empty() {
+            bail!("{origin}: a dataset scene is 2-dimensional and has no inflows");
+        }
+        if variant == SceneVariant::Walls {
+            let [nx, ny] =
+                [scene.domain.resolution[0], scene.domain.resolution[1]].map(|n| n as f32);
+            for (lower, upper) in [
+                ([0.0, 0.0], [1.0, ny]),
+                ([nx - 1.0, 0.0], [nx, ny]),
+                ([1.0, 0.0], [nx - 1.0, 1.0]),
+                ([1.0, ny - 1.0], [nx - 1.0, ny]),
+            ] {
+                scene
+                    .obstacles
+                    .push(Obstacle::at_rest(Geometry::boxed(lower, upper)?)?);
+            }
+        }
+        Ok(scene)
+    }
+}
+
 /// Simulates trajectory `index` of `split`: a random scene drawn from `seed` (train, valid) or
-/// test scene `index`; `steps` overrides the step count of test scenes. Runs on the calling
-/// thread ([`Host`], the ndarray backend; the 32×32 kernels stay below its parallel threshold).
+/// scene `index` of `scenes` (test); `steps` overrides the step count of test scenes. Runs on
+/// the calling thread ([`Host`], the ndarray backend; the 32×32 kernels stay below its parallel
+/// threshold).
 ///
 /// # Errors
 /// A scene that cannot be drawn or built, a failing simulation step.
@@ -146,6 +307,7 @@ pub fn simulate_trajectory(
     seed: u64,
     params: &RandomSceneParams,
     variant: SceneVariant,
+    scenes: &TestScenes,
     steps: usize,
 ) -> Result<RawTrajectory> {
     match split {
@@ -157,12 +319,8 @@ pub fn simulate_trajectory(
             Ok(RawTrajectory { trajectory, seed })
         }
         Split::Test => {
-            let (name, _) = TEST_SCENES
-                .get(index)
-                .with_context(|| format!("there are {} test scenes", TEST_SCENES.len()))?;
-            let scene = test_scene(index, variant)?;
-            let origin = format!("scenes/test/{name}");
-            let setup = scene.build::<Host>(&origin, &Default::default())?;
+            let scene = scenes.scene(index, variant)?;
+            let setup = scene.build::<Host>(&scenes.path(index), &Default::default())?;
             let ny = scene.domain.resolution[1];
             let obstacle_particles = cell_centres(&setup.simulation.solid_cells(0.0)?, ny);
             let trajectory = record_trajectory(
@@ -179,38 +337,14 @@ pub fn simulate_trajectory(
     }
 }
 
-/// Test scene `index`, checked for the dataset (2D, no inflows), with the wall ring added in the
-/// `walls` variant.
-///
-/// # Errors
-/// An invalid scene file.
-pub fn test_scene(index: usize, variant: SceneVariant) -> Result<Scene> {
-    let (name, text) = TEST_SCENES[index];
-    let origin = format!("scenes/test/{name}");
-    let mut scene = Scene::from_toml(text, &origin)?;
-    if scene.dim() != 2 || !scene.inflows.is_empty() {
-        bail!("{origin}: a dataset scene is 2-dimensional and has no inflows");
-    }
-    if variant == SceneVariant::Walls {
-        let [nx, ny] = [scene.domain.resolution[0], scene.domain.resolution[1]].map(|n| n as f32);
-        for (lower, upper) in [
-            ([0.0, 0.0], [1.0, ny]),
-            ([nx - 1.0, 0.0], [nx, ny]),
-            ([1.0, 0.0], [nx - 1.0, 1.0]),
-            ([1.0, ny - 1.0], [nx - 1.0, ny]),
-        ] {
-            scene
-                .obstacles
-                .push(Obstacle::at_rest(Geometry::boxed(lower, upper)?)?);
-        }
-    }
-    Ok(scene)
-}
-
 /// The position scale and offset of the stored positions: the grid of unit cells maps onto
-/// `[0.1, 0.9]` along its longest axis, as in the thesis (`x / 40 + 0.1` at 32 cells).
-pub fn position_scale(resolution: [usize; 2]) -> (f32, f32) {
-    (0.8 / resolution[0].max(resolution[1]) as f32, 0.1)
+/// `[0.1, 0.9]` along its longest axis, as in the thesis (`x / 40 + 0.1` at 32 cells), unless
+/// `scale` (`--position-scale`) sets the stored units per cell.
+pub fn position_scale(resolution: [usize; 2], scale: Option<f64>) -> (f32, f32) {
+    match scale {
+        Some(scale) => (scale as f32, 0.1),
+        None => (0.8 / resolution[0].max(resolution[1]) as f32, 0.1),
+    }
 }
 
 /// Checks that `path` is a directory or does not exist.

@@ -7,6 +7,7 @@ use phi::phi_gns::data::{
     Dataset, LIQUID, OBSTACLE, Trajectory, read_metadata, read_trajectory, read_trajectory_stats,
 };
 
+use super::rollout::failed;
 use super::{ok, phi, scratch};
 
 fn run(args: &[&str], dirs: &[&Path]) -> Output {
@@ -326,5 +327,72 @@ fn export_to_tfrecord_and_npz_and_import_back() {
         vec![original.frames, original.particles, original.dim]
     );
     assert_eq!(position.as_f32().unwrap(), &original.position[..]);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_test_split_from_scene_files_keeps_the_thesis_scale_on_a_taller_domain() {
+    let dir = scratch("dataset-scenes");
+    let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/generalisation");
+    let out = dir.join("tall");
+    let make_split = |split: &str, out: &Path, scenes: &Path, extra: &[&str]| {
+        let mut command = phi();
+        command
+            .args(["dataset", "generate", "--split", split, "--steps", "3", "--out"])
+            .arg(out)
+            .arg("--scenes")
+            .arg(scenes)
+            .args(extra);
+        command.output().unwrap()
+    };
+    let make = |out: &Path, scenes: &Path, extra: &[&str]| make_split("test", out, scenes, extra);
+    let stdout = ok(make(&out, &scenes, &["--position-scale", "0.025"]));
+    assert!(stdout.contains("wrote 2 trajectories"), "{stdout}");
+    let dataset = Dataset::open(&out).unwrap();
+    let m = dataset.metadata();
+    assert_eq!(m.position_scale, 0.025);
+    let expected = [[0.1, 0.9], [0.1, 1.7]];
+    assert_eq!(m.bounds.len(), 2);
+    for (got, want) in m.bounds.iter().flatten().zip(expected.iter().flatten()) {
+        assert!((got - want).abs() < 1e-12, "bounds {:?}", m.bounds);
+    }
+    assert_eq!(m.splits.get("test"), Some(&2));
+    // Scene 01's block spans cells 50..60 in y: at 1/40 per cell from 0.1, its particles start
+    // between 1.35 and 1.6, above the 32×32 domain's top (0.9).
+    let (t, _) = dataset.read_with_stats("test", 0).unwrap();
+    let ys: Vec<f32> = t.frame(0).iter().skip(1).step_by(2).copied().collect();
+    let (low, high) = ys.iter().fold((f32::MAX, f32::MIN), |(l, h), &y| (l.min(y), h.max(y)));
+    assert!(low > 1.35 && high < 1.6, "y from {low} to {high}");
+    assert_eq!(t.seed, 2001);
+
+    // The scenes decide the files: an edited scene is another configuration.
+    let edited = dir.join("edited");
+    std::fs::create_dir_all(&edited).unwrap();
+    for name in ["01_tall_drop.toml", "02_drop_into_pool.toml"] {
+        std::fs::copy(scenes.join(name), edited.join(name)).unwrap();
+    }
+    let text = std::fs::read_to_string(edited.join("01_tall_drop.toml")).unwrap();
+    std::fs::write(edited.join("01_tall_drop.toml"), text.replace("seed = 2001", "seed = 7")).unwrap();
+    let stderr = failed(make(&out, &edited, &["--position-scale", "0.025"]));
+    assert!(stderr.contains("test_scenes_crc32"), "{stderr}");
+
+    // Refusals: other splits, mixed domain sizes, a bad scale.
+    let stderr = failed(make_split("all", &dir.join("all"), &scenes, &[]));
+    assert!(stderr.contains("--split test"), "{stderr}");
+    let text = std::fs::read_to_string(edited.join("02_drop_into_pool.toml")).unwrap();
+    std::fs::write(
+        edited.join("02_drop_into_pool.toml"),
+        text.replace("resolution = [32, 64]", "resolution = [32, 32]")
+            .replace("lower = [10, 44], upper = [18, 52]", "lower = [10, 20], upper = [18, 28]"),
+    )
+    .unwrap();
+    let stderr = failed(make(&dir.join("mixed"), &edited, &[]));
+    assert!(
+        stderr.contains("02_drop_into_pool.toml") && stderr.contains("domain.resolution"),
+        "{stderr}"
+    );
+    let stderr = failed(make(&dir.join("scale"), &scenes, &["--position-scale", "0"]));
+    assert!(stderr.contains("--position-scale"), "{stderr}");
+    assert!(!dir.join("mixed").exists() && !dir.join("scale").exists());
     let _ = std::fs::remove_dir_all(dir);
 }
