@@ -5,6 +5,8 @@
 
 #[path = "model/batching.rs"]
 mod batching;
+#[path = "model/bounds.rs"]
+mod bounds;
 #[path = "model/common.rs"]
 mod common;
 #[path = "model/conformance.rs"]

@@ -38,3 +38,49 @@ pub(crate) fn is_temporary_of(name: &OsStr, files: &[&str]) -> bool {
             .is_some_and(|pid| !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()))
     })
 }
+
+/// `--bounds`: the walls a model with boundary features measures against when the dataset's
+/// domain is not the one it was trained on (domain generalisation, thesis fig. 5.9).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BoundsFrom {
+    /// The dataset's walls: the features see the domain as it is.
+    Data,
+    /// The training domain's walls, wherever the dataset's are.
+    Model,
+}
+
+/// Checks that `metadata` (read from `path`) fits the model of `spec` and returns the bounds the
+/// model should run with: `None` to keep its own. Without `choice`, a model with boundary
+/// features refuses other bounds, with a hint at `--bounds`.
+///
+/// # Errors
+/// A dataset of another dimension or other particle types; other bounds without `choice`.
+pub(crate) fn bounds_for(
+    spec: &phi_gns::model::ModelSpec,
+    metadata: &phi_gns::data::Metadata,
+    path: &std::path::Path,
+    choice: Option<BoundsFrom>,
+) -> anyhow::Result<Option<Vec<[f64; 2]>>> {
+    use anyhow::Context;
+    let Some(choice) = choice else {
+        let other_bounds = spec.config.boundary_features && metadata.bounds != spec.bounds;
+        spec.check_dataset(metadata, path).with_context(|| {
+            if other_bounds {
+                "the dataset's domain is not the model's; pass --bounds data (the features \
+                 measure the dataset's walls) or --bounds model (the training domain's) to \
+                 roll out on it anyway"
+                    .to_string()
+            } else {
+                format!("the model does not fit {}", path.display())
+            }
+        })?;
+        return Ok(None);
+    };
+    let mut same_domain = spec.clone();
+    same_domain.bounds = metadata.bounds.clone();
+    same_domain.check_dataset(metadata, path)?;
+    Ok(match choice {
+        BoundsFrom::Data if metadata.bounds != spec.bounds => Some(metadata.bounds.clone()),
+        BoundsFrom::Data | BoundsFrom::Model => None,
+    })
+}

@@ -32,7 +32,7 @@ use phi_gns::model::{Gns, GnsKernels, ModelError, load_model, read_spec};
 use phi_gns::rollout::{RolloutRange, position_mse, rollout};
 use serde::{Deserialize, Serialize};
 
-use super::is_temporary_of;
+use super::{BoundsFrom, bounds_for, is_temporary_of};
 use crate::backends::BackendKind;
 use crate::dataset::render::DatasetRenderer;
 use crate::output::vtk::{VtkFrame, VtkSeries};
@@ -107,6 +107,11 @@ pub struct RolloutArgs {
     /// `rollout.pvd` and `truth.pvd`, frames in `vtk/` (0: none).
     #[arg(long, default_value_t = 0)]
     pub vtk_every: usize,
+    /// For a dataset whose domain is not the model's: the walls its boundary features measure,
+    /// the dataset's (`data`) or the training domain's (`model`) [default: refuse such a
+    /// dataset].
+    #[arg(long, value_enum)]
+    pub bounds: Option<BoundsFrom>,
 }
 
 /// `rollout.json`: one trajectory's rollout.
@@ -178,6 +183,8 @@ pub struct Plan {
     indices: Vec<usize>,
     range: RolloutRange,
     dirs: Vec<PathBuf>,
+    /// The dataset's bounds for the model's boundary features (`--bounds data`).
+    bounds: Option<Vec<[f64; 2]>>,
 }
 
 /// Checks everything a rollout needs before anything is written: the model's `model.json`, the
@@ -190,7 +197,12 @@ pub struct Plan {
 pub fn plan(args: &RolloutArgs) -> Result<Plan> {
     let spec = read_spec(&args.model)?;
     let dataset = Dataset::open(&args.data)?;
-    spec.check_dataset(dataset.metadata(), &args.data.join(METADATA_FILE))?;
+    let bounds = bounds_for(
+        &spec,
+        dataset.metadata(),
+        &args.data.join(METADATA_FILE),
+        args.bounds,
+    )?;
     let count = dataset.split_len(&args.split)?;
     let indices: Vec<usize> = if args.all {
         if count == 0 {
@@ -260,6 +272,7 @@ pub fn plan(args: &RolloutArgs) -> Result<Plan> {
         indices,
         range,
         dirs,
+        bounds,
     })
 }
 
@@ -357,7 +370,10 @@ pub fn run(args: RolloutArgs) -> Result<()> {
 /// one's summary.
 fn roll_all<B: GnsKernels>(plan: &Plan, args: &RolloutArgs) -> Result<Vec<RolloutRecord>> {
     let device = B::default_device();
-    let model = load_model::<B>(&args.model, &device)?;
+    let mut model = load_model::<B>(&args.model, &device)?;
+    if let Some(bounds) = &plan.bounds {
+        model = model.with_bounds(bounds.clone())?;
+    }
     let mut records = Vec::with_capacity(plan.indices.len());
     for (&index, dir) in plan.indices.iter().zip(&plan.dirs) {
         let record = roll_one::<B>(&model, plan, args, index, dir, &device)?;

@@ -414,10 +414,23 @@ fn a_model_for_another_dimension_or_bounds_is_refused() {
     );
     let stderr = failed(rollout(&m2, &wide, &out, &[]));
     assert!(
-        stderr.contains("key 'bounds'") && stderr.contains("[0.0, 1.0]"),
+        stderr.contains("key 'bounds'")
+            && stderr.contains("[0.0, 1.0]")
+            && stderr.contains("--bounds data"),
         "{stderr}"
     );
     assert!(!out.exists(), "a refused rollout wrote {}", out.display());
+    // On another domain by choice: the particles stay farther than R from both domains' walls,
+    // so the dataset's walls and the model's give the same predictions, bit for bit.
+    let predicted = |choice: &str| {
+        let out = dir.join(format!("other-domain-{choice}"));
+        ok(rollout(&m2, &wide, &out, &["--steps", "3", "--bounds", choice]));
+        let arrays = read_npz(&out.join("test_0/rollout.npz")).unwrap();
+        array(&arrays, "predicted_position").data
+    };
+    assert_eq!(predicted("data"), predicted("model"));
+    let stderr = failed(rollout(&m3, &plane, &out, &["--bounds", "data"]));
+    assert!(stderr.contains("key 'dim'"), "{stderr}");
     // A 3D model on its own dataset rolls out (without a GIF: rendering is 2D).
     let stdout = ok(rollout(&m3, &space, &out, &["--steps", "2"]));
     assert!(!stdout.contains("rollout.gif"), "{stdout}");

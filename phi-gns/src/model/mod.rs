@@ -463,6 +463,18 @@ impl<B: GnsKernels> Gns<B> {
         Self::new(self.spec.clone(), params)
     }
 
+    /// The same model measuring its boundary features against other walls: `bounds` `[lower,
+    /// upper]` per dimension in stored units (a model trained on one domain rolled out on a
+    /// larger one). Without boundary features nothing changes but the recorded bounds.
+    ///
+    /// # Errors
+    /// [`ModelError::Config`] for bounds of another dimension, reversed or non-finite ones.
+    pub fn with_bounds(&self, bounds: Vec<[f64; 2]>) -> Result<Self, ModelError> {
+        let mut spec = self.spec.clone();
+        spec.bounds = bounds;
+        Self::new(spec, self.params.clone())
+    }
+
     /// The normalisation constants and bounds as `[dim]` tensors.
     pub fn normalisers(&self) -> &Normalisers<B> {
         &self.normalisers

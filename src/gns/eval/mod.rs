@@ -30,12 +30,13 @@ use phi_gns::eval::{
     Band, EmdCost, EvalOptions, ModelSummary, TrajectoryEvaluation, evaluate_trajectory,
 };
 use phi_gns::model::{
-    GnsKernels, MODEL_FILE, ModelError, ModelSpec, WEIGHTS_FILE, load_model, read_spec,
+    Gns, GnsKernels, MODEL_FILE, ModelError, ModelSpec, WEIGHTS_FILE, load_model, read_spec,
 };
 use phi_gns::rollout::{RolloutRange, rollout};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::{BoundsFrom, bounds_for};
 use crate::backends::BackendKind;
 use crate::dataset::render::DatasetRenderer;
 use crate::output::{FrameStyle, GifWriter, OutputError, RgbImage, side_by_side, write_atomic};
@@ -120,6 +121,11 @@ pub struct EvalArgs {
     /// Pixels per grid cell in the GIF.
     #[arg(long, default_value_t = 4)]
     pub pixels_per_cell: u32,
+    /// For a dataset whose domain is not the models': the walls their boundary features
+    /// measure, the dataset's (`data`) or the training domain's (`model`) [default: refuse such
+    /// a dataset].
+    #[arg(long, value_enum)]
+    pub bounds: Option<BoundsFrom>,
 }
 
 /// A model as the command line named it, resolved.
@@ -133,8 +139,25 @@ pub struct ModelEntry {
     pub run: Option<PathBuf>,
     /// Its model.json.
     pub spec: ModelSpec,
-    /// A digest of model.json and model.safetensors: which weights a cache entry belongs to.
+    /// A digest of model.json and model.safetensors: which weights a cache entry belongs to
+    /// (with the bounds of `--bounds data` appended when they replace the model's).
     pub digest: String,
+    /// The dataset's bounds for the boundary features (`--bounds data`), or `None`.
+    pub bounds: Option<Vec<[f64; 2]>>,
+}
+
+impl ModelEntry {
+    /// The model on `device`, with [`ModelEntry::bounds`] applied.
+    ///
+    /// # Errors
+    /// Unreadable or invalid model files.
+    pub fn load<B: GnsKernels>(&self, device: &B::Device) -> Result<Gns<B>> {
+        let gns = load_model::<B>(&self.dir, device)?;
+        Ok(match &self.bounds {
+            Some(bounds) => gns.with_bounds(bounds.clone())?,
+            None => gns,
+        })
+    }
 }
 
 /// One model's part of `eval.json`.
@@ -280,6 +303,7 @@ pub fn resolve_model(arg: &str) -> Result<ModelEntry> {
         run,
         spec,
         digest,
+        bounds: None,
     })
 }
 
@@ -305,10 +329,8 @@ pub fn plan(args: &EvalArgs) -> Result<Plan> {
     let metadata_path = args.data.join(METADATA_FILE);
     let mut models = Vec::with_capacity(args.models.len());
     for arg in &args.models {
-        let entry = resolve_model(arg)?;
-        entry
-            .spec
-            .check_dataset(dataset.metadata(), &metadata_path)
+        let mut entry = resolve_model(arg)?;
+        entry.bounds = bounds_for(&entry.spec, dataset.metadata(), &metadata_path, args.bounds)
             .with_context(|| {
                 format!(
                     "--model {arg} ({}) does not fit the dataset {}",
@@ -316,6 +338,9 @@ pub fn plan(args: &EvalArgs) -> Result<Plan> {
                     args.data.display()
                 )
             })?;
+        if let Some(bounds) = &entry.bounds {
+            entry.digest.push_str(&format!(":bounds{bounds:?}"));
+        }
         if let Some(other) = models.iter().find(|m: &&ModelEntry| m.label == entry.label) {
             bail!(
                 "--model {arg}: the name '{}' is taken by {}; name them: --model NAME=DIR",
@@ -535,7 +560,7 @@ fn evaluate_all<B: GnsKernels>(
         .map(|(m, k, index, path)| -> Result<()> {
             let model = &plan.models[*m];
             let device = B::default_device();
-            let gns = load_model::<B>(&model.dir, &device)?;
+            let gns = model.load::<B>(&device)?;
             let (trajectory, _) = plan.dataset.read_with_stats(&args.split, *index)?;
             let evaluation = evaluate_trajectory(&gns, &trajectory, &plan.options, &device)
                 .with_context(|| {
@@ -585,7 +610,7 @@ fn write_gif<B: GnsKernels>(plan: &Plan, args: &EvalArgs) -> Result<GifRecord> {
         plan.models
             .par_iter()
             .map(|model| -> Result<(usize, Vec<Vec<f32>>)> {
-                let gns = load_model::<B>(&model.dir, &device)?;
+                let gns = model.load::<B>(&device)?;
                 let c = model.spec.config.input_velocities;
                 let mut frames = vec![trajectory.frame(c).to_vec()];
                 let range = RolloutRange::full(c, trajectory.frames);
