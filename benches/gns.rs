@@ -17,9 +17,9 @@
 mod common;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use phi::dataset::{Split, TestScenes};
 use phi::dataset::generate::{GenerateOptions, generate};
 use phi::dataset::manifest::Shard;
+use phi::dataset::{Split, TestScenes};
 use phi_flip::{RandomSceneParams, SceneVariant};
 use phi_gns::data::{Metadata, Trajectory, TrajectoryStats, read_trajectory, trajectory_file_name};
 use phi_gns::graph::RadiusGraph;

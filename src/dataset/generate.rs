@@ -26,9 +26,7 @@ use super::manifest::{
     GeneratorConfig, MANIFEST, Manifest, Shard, read_generator, read_manifest,
     write_dataset_metadata, write_manifest,
 };
-use super::{
-    Split, TestScenes, check_dir, position_scale, simulate_trajectory, trajectory_seed,
-};
+use super::{Split, TestScenes, check_dir, position_scale, simulate_trajectory, trajectory_seed};
 use crate::memory::check_memory;
 
 /// What `phi dataset generate` does.

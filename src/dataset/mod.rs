@@ -269,7 +269,12 @@ impl TestScenes {
     /// An index past the scenes, an invalid scene file (naming it).
     pub fn scene(&self, index: usize, variant: SceneVariant) -> Result<Scene> {
         let Some((_, text)) = self.files.get(index) else {
-            bail!("{} holds {} test scenes, not {}", self.origin, self.len(), index + 1);
+            bail!(
+                "{} holds {} test scenes, not {}",
+                self.origin,
+                self.len(),
+                index + 1
+            );
         };
         let origin = self.path(index);
         let mut scene = Scene::from_toml(text, &origin)?;

@@ -424,7 +424,12 @@ fn a_model_for_another_dimension_or_bounds_is_refused() {
     // so the dataset's walls and the model's give the same predictions, bit for bit.
     let predicted = |choice: &str| {
         let out = dir.join(format!("other-domain-{choice}"));
-        ok(rollout(&m2, &wide, &out, &["--steps", "3", "--bounds", choice]));
+        ok(rollout(
+            &m2,
+            &wide,
+            &out,
+            &["--steps", "3", "--bounds", choice],
+        ));
         let arrays = read_npz(&out.join("test_0/rollout.npz")).unwrap();
         array(&arrays, "predicted_position").data
     };

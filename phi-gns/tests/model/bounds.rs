@@ -44,7 +44,10 @@ fn walls_moved_with_the_particles_leave_the_accelerations_unchanged<B: GnsKernel
         .with_bounds(vec![[0.1, 0.9], [0.1, 0.9 + f64::from(shift)]])
         .unwrap();
     let moved_walls = model
-        .with_bounds(vec![[0.1, 0.9], [0.1 + f64::from(shift), 0.9 + f64::from(shift)]])
+        .with_bounds(vec![
+            [0.1, 0.9],
+            [0.1 + f64::from(shift), 0.9 + f64::from(shift)],
+        ])
         .unwrap();
     let with_walls = accelerations(&moved_walls, &moved);
     let without_walls = accelerations(&model, &moved);
@@ -52,14 +55,20 @@ fn walls_moved_with_the_particles_leave_the_accelerations_unchanged<B: GnsKernel
 
     let scale = max_abs(&here);
     let diff = |a: &[f64], b: &[f64]| {
-        a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max)
     };
     assert!(
         diff(&with_walls, &here) <= 1e-3 * scale,
         "walls moved with the particles: the accelerations moved by {:.3e} (scale {scale:.3e})",
         diff(&with_walls, &here)
     );
-    for (what, other) in [("the model's walls", &without_walls), ("a taller domain", &in_taller)] {
+    for (what, other) in [
+        ("the model's walls", &without_walls),
+        ("a taller domain", &in_taller),
+    ] {
         assert!(
             diff(other, &here) > 0.02 * scale,
             "particles moved away from the lower wall ({what}): the accelerations changed by \

@@ -226,8 +226,10 @@ fn burn_and_tch_take_the_same_training_step() {
             (b_loss - t_loss).abs() <= 1e-5 * b_loss.abs(),
             "{which:?}: {b_loss} vs {t_loss}"
         );
-        let (b, t): (phi_gns::model::Parameters<Burn>, phi_gns::model::Parameters<Tch>) =
-            (burn.params().clone(), tch.params().clone());
+        let (b, t): (
+            phi_gns::model::Parameters<Burn>,
+            phi_gns::model::Parameters<Tch>,
+        ) = (burn.params().clone(), tch.params().clone());
         for ((name, x), (_, y)) in host_params(&b).iter().zip(host_params(&t).iter()) {
             for (a, c) in x.iter().zip(y) {
                 // The first Adam step moves each parameter by ~lr·sign(g) = 1e-4; the gradients
