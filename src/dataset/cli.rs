@@ -6,13 +6,13 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use phi_flip::{RandomSceneParams, SceneVariant};
 
-use super::{Split, TestScenes};
 use super::export::{ExportFormat, ExportOptions, export};
 use super::generate::{GenerateOptions, generate};
 use super::manifest::Shard;
 use super::merge::merge;
 use super::render::render_trajectory;
 use super::stats::{StatsOptions, dataset_stats, format_report};
+use super::{Split, TestScenes};
 
 /// `phi dataset <command>`.
 #[derive(Debug, Subcommand)]
@@ -204,12 +204,7 @@ pub fn run(command: DatasetCommand) -> Result<()> {
             })?;
             print!("{}", format_report(&report, &dir, radius, print_every));
             if let Some(out) = out {
-                println!(
-                    "wrote {}: x = frame (ticks every 50), y = neighbours (ticks every 10), blue \
-                     shade = share of liquid particles, red = mean, green = quartiles, orange = \
-                     5th and 95th percentiles",
-                    out.display()
-                );
+                println!("wrote {}", out.display());
             }
             Ok(())
         }

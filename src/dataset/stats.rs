@@ -14,7 +14,7 @@ use phi_gns::data::{Dataset, LIQUID, METADATA_FILE, Trajectory};
 use crate::memory::check_memory;
 use rayon::prelude::*;
 
-use crate::output::{RgbImage, write_png};
+use phi_plot::{Legend, LinePlot, Series};
 
 /// Neighbour counts from this value up share the last bin of the histograms.
 pub const MAX_NEIGHBOURS: usize = 127;
@@ -169,7 +169,9 @@ pub fn dataset_stats(options: &StatsOptions) -> Result<StatsReport> {
         histogram,
     };
     if let Some(out) = &options.out {
-        write_png(out, &plot(&report))?;
+        plot(&report, options.radius)?
+            .write_png(out)
+            .with_context(|| format!("drawing {}", out.display()))?;
     }
     Ok(report)
 }
@@ -290,80 +292,43 @@ fn summarise(histogram: &[u64]) -> FrameNeighbours {
     }
 }
 
-/// Pixels per neighbour on the vertical axis and per frame on the horizontal one.
-const PLOT_Y_SCALE: u32 = 4;
-const PLOT_MARGIN: u32 = 12;
-
-/// The plot of thesis fig. 5.4: x = frame (one pixel column per frame, ticks every 50 frames),
-/// y = neighbours (4 pixels per neighbour, ticks every 10), grey level = share of the frame's
-/// liquid particles with that many neighbours (darker: more); orange: 5th–95th percentile band
-/// edges, green: quartiles, red: mean.
-pub fn plot(report: &StatsReport) -> RgbImage {
-    let frames = report.frames.max(1) as u32;
-    let top = report
-        .neighbours
-        .iter()
-        .map(|f| f.max)
-        .max()
-        .unwrap_or(0)
-        .max(10)
-        .div_ceil(10) as u32
-        * 10;
-    let (w, h) = (
-        frames + 2 * PLOT_MARGIN,
-        top * PLOT_Y_SCALE + 2 * PLOT_MARGIN,
-    );
-    let mut image = RgbImage::new(w, h, [255, 255, 255]);
-    let x_of = |t: u32| PLOT_MARGIN + t;
-    let y_of = |k: f64| (h - PLOT_MARGIN) as f64 - 1.0 - k * PLOT_Y_SCALE as f64;
-    for (t, histogram) in report.histogram.iter().enumerate() {
-        let total: u64 = histogram.iter().sum();
-        let peak = histogram.iter().copied().max().unwrap_or(0).max(1);
-        if total == 0 {
-            continue;
-        }
-        for (k, &c) in histogram.iter().enumerate().filter(|(_, c)| **c > 0) {
-            let shade = 230 - (200 * c / peak) as u8;
-            for dy in 0..PLOT_Y_SCALE {
-                let y = y_of(k as f64) as u32 - dy;
-                image.set_pixel(x_of(t as u32), y, [shade, shade, shade + 25]);
-            }
-        }
+/// The plot of thesis fig. 5.4: the number of neighbours of a liquid particle against the
+/// frame, over the liquid particles of every measured trajectory: the mean, the median with the
+/// quartiles shaded, and the 5th and 95th percentiles, with axes, labels and a legend.
+///
+/// # Errors
+/// A report without frames (nothing to draw).
+pub fn plot(report: &StatsReport, radius: f32) -> Result<LinePlot> {
+    if report.neighbours.is_empty() {
+        bail!("no frames to plot");
     }
-    let mut dot = |t: usize, k: f64, color: [u8; 3]| {
-        let y = y_of(k).round() as u32;
-        image.set_pixel(x_of(t as u32), y, color);
-        image.set_pixel(x_of(t as u32), y.saturating_sub(1), color);
+    let x: Vec<f64> = (0..report.neighbours.len()).map(|t| t as f64).collect();
+    let column = |q: usize| -> Vec<f64> {
+        report
+            .neighbours
+            .iter()
+            .map(|f| f.percentiles[q] as f64)
+            .collect()
     };
-    for (t, f) in report.neighbours.iter().enumerate() {
-        let [p5, p25, _, p75, p95] = f.percentiles;
-        dot(t, p5 as f64, [240, 150, 0]);
-        dot(t, p95 as f64, [240, 150, 0]);
-        dot(t, p25 as f64, [0, 160, 0]);
-        dot(t, p75 as f64, [0, 160, 0]);
-        dot(t, f.mean, [220, 0, 0]);
-    }
-    // Axes and ticks.
-    let black = [0, 0, 0];
-    let (x0, y0) = (PLOT_MARGIN - 1, h - PLOT_MARGIN);
-    for x in x0..w - PLOT_MARGIN / 2 {
-        image.set_pixel(x, y0, black);
-    }
-    for y in PLOT_MARGIN / 2..=y0 {
-        image.set_pixel(x0, y, black);
-    }
-    for t in (0..frames).step_by(50) {
-        for dy in 1..5 {
-            image.set_pixel(x_of(t), y0 + dy, black);
-        }
-    }
-    for k in (0..=top).step_by(10) {
-        let y = y_of(k as f64) as u32;
-        for dx in 1..5 {
-            image.set_pixel(x0 - dx, y, black);
-        }
-    }
-    image
+    let mean = report.neighbours.iter().map(|f| f.mean).collect();
+    let (trajectories, _) = report.trajectories;
+    Ok(LinePlot::new(
+        format!(
+            "Neighbours within R = {radius} of a liquid particle ({}, {trajectories} trajectories)",
+            report.split
+        ),
+        "frame",
+        "neighbours",
+    )
+    .with_size(900, 520)
+    .with_legend(Legend::UpperRight)
+    .with_series(Series::new("mean", x.clone(), mean))
+    .with_series(
+        Series::new("median, quartiles shaded", x.clone(), column(2))
+            .with_band(column(1), column(3)),
+    )
+    .with_series(Series::new("5th percentile", x.clone(), column(0)))
+    .with_series(Series::new("95th percentile", x, column(4))))
 }
 
 /// The printed form of a report: counts, then the neighbour distribution every `every` frames.

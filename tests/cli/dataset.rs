@@ -255,7 +255,11 @@ fn render_writes_a_gif_and_stats_a_png() {
     ));
     assert!(stdout.contains("3 of 3 trajectories"), "{stdout}");
     assert!(stdout.contains("liquid    particles: min"), "{stdout}");
-    assert_eq!(&std::fs::read(&png).unwrap()[1..4], b"PNG");
+    let bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&bytes[1..4], b"PNG");
+    // The IHDR chunk: width and height of the labelled plot.
+    let size = |at: usize| u32::from_be_bytes(bytes[at..at + 4].try_into().unwrap());
+    assert_eq!((size(16), size(20)), (900, 520));
     let _ = std::fs::remove_dir_all(dir);
 }
 
@@ -338,7 +342,9 @@ fn a_test_split_from_scene_files_keeps_the_thesis_scale_on_a_taller_domain() {
     let make_split = |split: &str, out: &Path, scenes: &Path, extra: &[&str]| {
         let mut command = phi();
         command
-            .args(["dataset", "generate", "--split", split, "--steps", "3", "--out"])
+            .args([
+                "dataset", "generate", "--split", split, "--steps", "3", "--out",
+            ])
             .arg(out)
             .arg("--scenes")
             .arg(scenes)
@@ -361,7 +367,9 @@ fn a_test_split_from_scene_files_keeps_the_thesis_scale_on_a_taller_domain() {
     // between 1.35 and 1.6, above the 32×32 domain's top (0.9).
     let (t, _) = dataset.read_with_stats("test", 0).unwrap();
     let ys: Vec<f32> = t.frame(0).iter().skip(1).step_by(2).copied().collect();
-    let (low, high) = ys.iter().fold((f32::MAX, f32::MIN), |(l, h), &y| (l.min(y), h.max(y)));
+    let (low, high) = ys
+        .iter()
+        .fold((f32::MAX, f32::MIN), |(l, h), &y| (l.min(y), h.max(y)));
     assert!(low > 1.35 && high < 1.6, "y from {low} to {high}");
     assert_eq!(t.seed, 2001);
 
@@ -372,7 +380,11 @@ fn a_test_split_from_scene_files_keeps_the_thesis_scale_on_a_taller_domain() {
         std::fs::copy(scenes.join(name), edited.join(name)).unwrap();
     }
     let text = std::fs::read_to_string(edited.join("01_tall_drop.toml")).unwrap();
-    std::fs::write(edited.join("01_tall_drop.toml"), text.replace("seed = 2001", "seed = 7")).unwrap();
+    std::fs::write(
+        edited.join("01_tall_drop.toml"),
+        text.replace("seed = 2001", "seed = 7"),
+    )
+    .unwrap();
     let stderr = failed(make(&out, &edited, &["--position-scale", "0.025"]));
     assert!(stderr.contains("test_scenes_crc32"), "{stderr}");
 
@@ -383,7 +395,10 @@ fn a_test_split_from_scene_files_keeps_the_thesis_scale_on_a_taller_domain() {
     std::fs::write(
         edited.join("02_drop_into_pool.toml"),
         text.replace("resolution = [32, 64]", "resolution = [32, 32]")
-            .replace("lower = [10, 44], upper = [18, 52]", "lower = [10, 20], upper = [18, 28]"),
+            .replace(
+                "lower = [10, 44], upper = [18, 52]",
+                "lower = [10, 20], upper = [18, 28]",
+            ),
     )
     .unwrap();
     let stderr = failed(make(&dir.join("mixed"), &edited, &[]));
@@ -391,7 +406,11 @@ fn a_test_split_from_scene_files_keeps_the_thesis_scale_on_a_taller_domain() {
         stderr.contains("02_drop_into_pool.toml") && stderr.contains("domain.resolution"),
         "{stderr}"
     );
-    let stderr = failed(make(&dir.join("scale"), &scenes, &["--position-scale", "0"]));
+    let stderr = failed(make(
+        &dir.join("scale"),
+        &scenes,
+        &["--position-scale", "0"],
+    ));
     assert!(stderr.contains("--position-scale"), "{stderr}");
     assert!(!dir.join("mixed").exists() && !dir.join("scale").exists());
     let _ = std::fs::remove_dir_all(dir);
