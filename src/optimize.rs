@@ -6,7 +6,8 @@
 //! Output directory:
 //! - `loss.csv`: `iteration,loss,gradient_norm,rms_distance,chamfer` per iteration (iteration
 //!   `k` is the loss of the initial positions after `k` gradient steps);
-//! - `loss.png`: the loss curve;
+//! - `loss.png`: the loss curve (labelled axes, logarithmic when every loss is positive; not
+//!   drawn when no loss is finite);
 //! - `frames/iteration_KKK_initial.png`, `frames/iteration_KKK_final.png`: the initial positions
 //!   and the simulated positions of the first, every `frame_every`-th and the last iteration,
 //!   the target drawn in orange under the liquid (blue) — initial frames show the target's
@@ -27,12 +28,11 @@ use phi_core::point_sets::set_distances;
 use phi_flip::optimize::{Forward, IterationRecord, LossSpec};
 use phi_flip::{OptimizeConfig, OptimizeProblem};
 use phi_gns::model::GnsKernels;
+use phi_plot::{LinePlot, Series};
 use serde::Serialize;
 
 use crate::gns::inverse::GnsForward;
-use crate::output::{
-    FrameStyle, KIND_LIQUID, OutputError, RgbImage, render_frame, write_atomic, write_png,
-};
+use crate::output::{FrameStyle, KIND_LIQUID, OutputError, render_frame, write_atomic, write_png};
 
 /// `phi optimize CONFIG.toml --out DIR [--backend burn|tch] [--iterations N] [--loss L]`.
 #[derive(Debug, Clone, clap::Args)]
@@ -307,7 +307,13 @@ pub fn optimize<B: AutodiffBackend + LatticeKernels + GnsKernels>(
     }
     write_loss_csv(&out.join("loss.csv"), records)?;
     let losses: Vec<f32> = records.iter().map(|r| r.loss).collect();
-    write_png(out.join("loss.png"), &plot_losses(&losses))?;
+    let loss_png = out.join("loss.png");
+    match plot_losses(&losses) {
+        Some(plot) => plot
+            .write_png(&loss_png)
+            .with_context(|| format!("drawing {}", loss_png.display()))?,
+        None => tracing::warn!("no finite loss: {} not drawn", loss_png.display()),
+    }
 
     let (first, last) = match (records.first(), records.last()) {
         (Some(f), Some(l)) => (f, l),
@@ -372,88 +378,22 @@ fn write_loss_csv(path: &Path, records: &[IterationRecord]) -> Result<()> {
     Ok(())
 }
 
-/// A 640×400 plot of `losses` against the iteration: axes from 0, a grey line per tenth of the
-/// largest loss, the curve in blue with a dot per iteration.
-pub fn plot_losses(losses: &[f32]) -> RgbImage {
-    let (width, height) = (640u32, 400u32);
-    let (left, right, top, bottom) = (40i64, 20i64, 20i64, 30i64);
-    let mut image = RgbImage::new(width, height, [255, 255, 255]);
-    let plot_w = i64::from(width) - left - right;
-    let plot_h = i64::from(height) - top - bottom;
+/// The loss against the iteration, with axes, labels and a legend: on a logarithmic axis when
+/// every finite loss is positive, else a linear one; a non-finite loss leaves a gap. `None`
+/// when no loss is finite (nothing to draw).
+pub fn plot_losses(losses: &[f32]) -> Option<LinePlot> {
     let finite: Vec<f32> = losses.iter().copied().filter(|l| l.is_finite()).collect();
-    let max = finite
-        .iter()
-        .copied()
-        .fold(0.0f32, f32::max)
-        .max(f32::MIN_POSITIVE);
-    let x_of = |i: usize| left + (i as i64 * plot_w) / (losses.len().max(2) as i64 - 1);
-    let y_of = |l: f32| top + plot_h - ((l / max).clamp(0.0, 1.0) * plot_h as f32).round() as i64;
-    for tenth in 1..=10 {
-        let y = top + plot_h - plot_h * tenth / 10;
-        line(&mut image, (left, y), (left + plot_w, y), [225, 225, 225]);
+    if finite.is_empty() {
+        return None;
     }
-    for (i, _) in losses.iter().enumerate() {
-        let x = x_of(i);
-        line(
-            &mut image,
-            (x, top + plot_h),
-            (x, top + plot_h + 4),
-            [40, 40, 40],
-        );
-    }
-    line(&mut image, (left, top), (left, top + plot_h), [40, 40, 40]);
-    line(
-        &mut image,
-        (left, top + plot_h),
-        (left + plot_w, top + plot_h),
-        [40, 40, 40],
-    );
-    let points: Vec<(i64, i64)> = losses
-        .iter()
-        .enumerate()
-        .filter(|(_, l)| l.is_finite())
-        .map(|(i, &l)| (x_of(i), y_of(l)))
-        .collect();
-    for pair in points.windows(2) {
-        line(&mut image, pair[0], pair[1], [30, 100, 220]);
-    }
-    for &(x, y) in &points {
-        for dx in -2..=2 {
-            for dy in -2..=2 {
-                set(&mut image, x + dx, y + dy, [30, 100, 220]);
-            }
-        }
-    }
-    image
-}
-
-fn set(image: &mut RgbImage, x: i64, y: i64, color: [u8; 3]) {
-    if let (Ok(x), Ok(y)) = (u32::try_from(x), u32::try_from(y)) {
-        image.set_pixel(x, y, color);
-    }
-}
-
-/// Bresenham's line from `a` to `b`.
-fn line(image: &mut RgbImage, a: (i64, i64), b: (i64, i64), color: [u8; 3]) {
-    let (mut x, mut y) = a;
-    let (dx, dy) = ((b.0 - x).abs(), -(b.1 - y).abs());
-    let (sx, sy) = (if x < b.0 { 1 } else { -1 }, if y < b.1 { 1 } else { -1 });
-    let mut err = dx + dy;
-    loop {
-        set(image, x, y, color);
-        if (x, y) == b {
-            break;
-        }
-        let e2 = 2 * err;
-        if e2 >= dy {
-            err += dy;
-            x += sx;
-        }
-        if e2 <= dx {
-            err += dx;
-            y += sy;
-        }
-    }
+    let x = (0..losses.len()).map(|i| i as f64).collect();
+    let y = losses.iter().map(|&l| f64::from(l)).collect();
+    Some(
+        LinePlot::new("Optimisation", "iteration", "loss")
+            .with_log_y(finite.iter().all(|&l| l > 0.0))
+            .with_size(640, 400)
+            .with_series(Series::new("loss", x, y)),
+    )
 }
 
 /// The first iteration from which the loss stays within 1% of the lowest, where "within" also

@@ -88,6 +88,9 @@ fn optimize_writes_loss_curve_plot_and_frames() {
     }
     let png = std::fs::read(out.join("loss.png")).unwrap();
     assert_eq!(&png[1..4], b"PNG");
+    // The IHDR chunk: the labelled 640 × 400 plot.
+    let size = |at: usize| u32::from_be_bytes(png[at..at + 4].try_into().unwrap());
+    assert_eq!((size(16), size(20)), (640, 400));
 }
 
 #[test]
