@@ -212,3 +212,74 @@ fn eval_refuses_what_does_not_fit() {
     );
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn a_model_evaluated_on_the_walls_variant_joins_the_same_table() {
+    let dir = scratch("eval-model-data");
+    let (data, walls, short) = (dir.join("data"), dir.join("walls"), dir.join("short"));
+    let splits = [("test", 2)];
+    tiny_dataset_with(&data, 2, [0.1, 0.9], Variant::Obstacles, &splits, 20);
+    tiny_dataset_with(
+        &walls,
+        2,
+        [0.1, 0.9],
+        Variant::WallsAsParticles,
+        &splits,
+        20,
+    );
+    tiny_dataset_with(
+        &short,
+        2,
+        [0.1, 0.9],
+        Variant::WallsAsParticles,
+        &splits,
+        16,
+    );
+    let (a, w) = (dir.join("a"), dir.join("w"));
+    ok(init(&data, &a, &["--seed", "1"]));
+    ok(init(&walls, &w, &["--seed", "2"]));
+    let options = [
+        "--short-rollout",
+        "5",
+        "--sinkhorn-every",
+        "0",
+        "--gif-every",
+        "4",
+    ];
+    let models = [a.display().to_string(), w.display().to_string()];
+    let mut both = options.to_vec();
+    let pair = format!("w={}", walls.display());
+    both.extend(["--model-data", &pair]);
+    let out = dir.join("out");
+    let stdout = ok(eval(&models, &data, &out, &both));
+    assert!(stdout.contains("w: on"), "{stdout}");
+    let record = json(&out.join("eval.json"));
+    assert!(record["models"][0].get("dataset").is_none(), "{record}");
+    assert_eq!(record["models"][1]["dataset"], walls.display().to_string());
+    assert_eq!(record["gif"]["panels"].as_array().unwrap().len(), 3);
+    // w's row is what it scores on its own dataset alone.
+    let alone = dir.join("alone");
+    ok(eval(&models[1..], &walls, &alone, &options));
+    let alone = json(&alone.join("eval.json"));
+    for key in ["mse_acc1", "mse20", "mse400", "emd"] {
+        let (x, y) = (
+            &record["models"][1]["summary"][key],
+            &alone["models"][0]["summary"][key],
+        );
+        assert!(x.is_number(), "{key}: {x}");
+        assert_eq!(x, y, "{key}");
+    }
+    // A name no model has, and a dataset of other scenes, are refused before anything is written.
+    let refused = dir.join("refused");
+    let stray = format!("x={}", walls.display());
+    let stderr = failed(eval(&models, &data, &refused, &["--model-data", &stray]));
+    assert!(stderr.contains("no --model is named 'x'"), "{stderr}");
+    let other = format!("w={}", short.display());
+    let stderr = failed(eval(&models, &data, &refused, &["--model-data", &other]));
+    assert!(
+        stderr.contains("sequence_length") && stderr.contains("not the same scenes"),
+        "{stderr}"
+    );
+    assert!(!refused.exists());
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -84,6 +84,12 @@ pub struct EvalArgs {
     /// The dataset directory.
     #[arg(long)]
     pub data: PathBuf,
+    /// `NAME=DATASET`: evaluate the model named NAME on another dataset of the same scenes (a
+    /// walls-variant model such as 1snb on the walls variant of `--data`), so that it joins the
+    /// same table; its split must come from the same seed, with the same trajectory count, frames
+    /// and bounds. Repeat for several models.
+    #[arg(long = "model-data", value_name = "NAME=DATASET")]
+    pub model_data: Vec<String>,
     /// The split to evaluate on.
     #[arg(long, default_value = "test")]
     pub split: String,
@@ -144,6 +150,9 @@ pub struct ModelEntry {
     pub digest: String,
     /// The dataset's bounds for the boundary features (`--bounds data`), or `None`.
     pub bounds: Option<Vec<[f64; 2]>>,
+    /// Which of [`Plan`]'s datasets it is evaluated on: 0 for `--data`, k for the k-th
+    /// `--model-data`.
+    pub data: usize,
 }
 
 impl ModelEntry {
@@ -167,6 +176,9 @@ pub struct ModelRecord {
     pub label: String,
     /// The model directory.
     pub dir: String,
+    /// The dataset it was evaluated on when not the evaluation's (`--model-data`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dataset: Option<String>,
     /// The weights digest.
     pub digest: String,
     /// The metrics over the evaluated trajectories (`null` until done).
@@ -231,7 +243,8 @@ pub struct CacheEntry {
 /// What was checked before any evaluation.
 #[derive(Debug)]
 pub struct Plan {
-    dataset: Dataset,
+    /// `--data`, then each `--model-data` dataset.
+    datasets: Vec<Dataset>,
     models: Vec<ModelEntry>,
     indices: Vec<usize>,
     options: EvalOptions,
@@ -304,6 +317,7 @@ pub fn resolve_model(arg: &str) -> Result<ModelEntry> {
         spec,
         digest,
         bounds: None,
+        data: 0,
     })
 }
 
@@ -326,16 +340,23 @@ fn model_digest(dir: &Path) -> Result<String> {
 /// Naming the option, file or key and what is wrong.
 pub fn plan(args: &EvalArgs) -> Result<Plan> {
     let dataset = Dataset::open(&args.data)?;
-    let metadata_path = args.data.join(METADATA_FILE);
+    let (mut datasets, model_data) = (vec![dataset], other_datasets(args)?);
     let mut models = Vec::with_capacity(args.models.len());
     for arg in &args.models {
         let mut entry = resolve_model(arg)?;
-        entry.bounds = bounds_for(&entry.spec, dataset.metadata(), &metadata_path, args.bounds)
+        if let Some((_, dir, other)) = model_data.iter().find(|(name, ..)| *name == entry.label) {
+            entry.data = datasets.len();
+            entry.digest.push_str(&format!(":data{}", dir.display()));
+            datasets.push(other.clone());
+        }
+        let data = &datasets[entry.data];
+        let metadata_path = data.dir().join(METADATA_FILE);
+        entry.bounds = bounds_for(&entry.spec, data.metadata(), &metadata_path, args.bounds)
             .with_context(|| {
                 format!(
                     "--model {arg} ({}) does not fit the dataset {}",
                     entry.dir.display(),
-                    args.data.display()
+                    data.dir().display()
                 )
             })?;
         if let Some(bounds) = &entry.bounds {
@@ -356,7 +377,18 @@ pub fn plan(args: &EvalArgs) -> Result<Plan> {
         }
         models.push(entry);
     }
+    if let Some((name, ..)) = model_data
+        .iter()
+        .find(|(name, ..)| !models.iter().any(|m| m.label == *name))
+    {
+        bail!("--model-data {name}=…: no --model is named '{name}'");
+    }
+    let dataset = &datasets[0];
     let count = dataset.split_len(&args.split)?;
+    for (name, dir, other) in &model_data {
+        same_scenes(dataset, other, &args.split)
+            .with_context(|| format!("--model-data {name}={}", dir.display()))?;
+    }
     if count == 0 {
         bail!(
             "{}: split '{}' has no trajectories",
@@ -407,11 +439,69 @@ pub fn plan(args: &EvalArgs) -> Result<Plan> {
         density_radius: radius,
     };
     Ok(Plan {
-        dataset,
+        datasets,
         models,
         indices: (0..used).collect(),
         options,
     })
+}
+
+/// The `--model-data NAME=DATASET` pairs, opened.
+fn other_datasets(args: &EvalArgs) -> Result<Vec<(String, PathBuf, Dataset)>> {
+    let mut out: Vec<(String, PathBuf, Dataset)> = Vec::with_capacity(args.model_data.len());
+    for arg in &args.model_data {
+        let Some((name, dir)) = arg
+            .split_once('=')
+            .filter(|(n, d)| !n.is_empty() && !d.is_empty())
+        else {
+            bail!("--model-data {arg}: expected NAME=DATASET, NAME a --model's name");
+        };
+        if out.iter().any(|(n, ..)| n == name) {
+            bail!("--model-data {arg}: the model '{name}' has a dataset already");
+        }
+        let dataset = Dataset::open(dir).with_context(|| format!("--model-data {arg}"))?;
+        out.push((name.to_string(), PathBuf::from(dir), dataset));
+    }
+    Ok(out)
+}
+
+/// Checks that `other` holds the scenes of `dataset`'s `split`: the same generator seed, the
+/// same number of trajectories, frames, dimension and bounds (the walls variant of a dataset
+/// differs in its wall particles alone).
+fn same_scenes(dataset: &Dataset, other: &Dataset, split: &str) -> Result<()> {
+    let (a, b) = (dataset.metadata(), other.metadata());
+    let what = |key: &str, x: String, y: String| {
+        anyhow::anyhow!(
+            "{}: {key} is {y}, where {} has {x}: not the same scenes",
+            other.dir().join(METADATA_FILE).display(),
+            dataset.dir().display()
+        )
+    };
+    if a.seeds.get(split) != b.seeds.get(split) {
+        let show = |m: &phi_gns::data::Metadata| {
+            m.seeds
+                .get(split)
+                .map_or("none".to_string(), u64::to_string)
+        };
+        return Err(what(&format!("seeds.{split}"), show(a), show(b)));
+    }
+    let (n, m) = (dataset.split_len(split)?, other.split_len(split)?);
+    if n != m {
+        return Err(what(
+            &format!("splits.{split}"),
+            n.to_string(),
+            m.to_string(),
+        ));
+    }
+    if a.sequence_length != b.sequence_length {
+        let (x, y) = (a.sequence_length.to_string(), b.sequence_length.to_string());
+        return Err(what("sequence_length", x, y));
+    }
+    if a.dim != b.dim || a.bounds != b.bounds {
+        let (x, y) = (format!("{:?}", a.bounds), format!("{:?}", b.bounds));
+        return Err(what("bounds", x, y));
+    }
+    Ok(())
 }
 
 /// Refuses an output directory that `phi eval` did not write: a file, or a non-empty directory
@@ -472,6 +562,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
             .map(|m| ModelRecord {
                 label: m.label.clone(),
                 dir: m.dir.display().to_string(),
+                dataset: (m.data > 0).then(|| plan.datasets[m.data].dir().display().to_string()),
                 digest: m.digest.clone(),
                 summary: None,
                 mse_band: None,
@@ -486,7 +577,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
         model.mse_band = Some(Band::of(evals, |e| &e.curves.mse));
         model.emd_band = Some(Band::of(evals, |e| &e.curves.emd));
     }
-    if args.gif_every > 0 && plan.dataset.metadata().dim == 2 {
+    if args.gif_every > 0 && plan.datasets[0].metadata().dim == 2 {
         record.gif = Some(crate::with_backend!(kind, B => write_gif::<B>(&plan, &args))?);
     }
     let mut figures = Vec::new();
@@ -561,7 +652,8 @@ fn evaluate_all<B: GnsKernels>(
             let model = &plan.models[*m];
             let device = B::default_device();
             let gns = model.load::<B>(&device)?;
-            let (trajectory, _) = plan.dataset.read_with_stats(&args.split, *index)?;
+            let dataset = &plan.datasets[model.data];
+            let (trajectory, _) = dataset.read_with_stats(&args.split, *index)?;
             let evaluation = evaluate_trajectory(&gns, &trajectory, &plan.options, &device)
                 .with_context(|| {
                     format!(
@@ -604,17 +696,25 @@ fn evaluate_all<B: GnsKernels>(
 /// whose rollout blew up keeps its last finite frame, captioned "(blown up)"; one that reads
 /// more history frames than another shows the truth until its own start, captioned "(history)".
 fn write_gif<B: GnsKernels>(plan: &Plan, args: &EvalArgs) -> Result<GifRecord> {
-    let (trajectory, _) = plan.dataset.read_with_stats(&args.split, args.gif_index)?;
+    // The trajectory of every dataset: a `--model-data` model rolls out on its own and is drawn
+    // with its own particles (the walls of the walls variant).
+    let trajectories: Vec<_> = plan
+        .datasets
+        .iter()
+        .map(|d| Ok(d.read_with_stats(&args.split, args.gif_index)?.0))
+        .collect::<Result<_>>()?;
+    let trajectory = &trajectories[0];
     let device = B::default_device();
     let rollouts: Vec<(usize, Vec<Vec<f32>>)> =
         plan.models
             .par_iter()
             .map(|model| -> Result<(usize, Vec<Vec<f32>>)> {
+                let own = &trajectories[model.data];
                 let gns = model.load::<B>(&device)?;
                 let c = model.spec.config.input_velocities;
-                let mut frames = vec![trajectory.frame(c).to_vec()];
-                let range = RolloutRange::full(c, trajectory.frames);
-                let ran = rollout(&gns, &trajectory, range, &device, |_, positions| {
+                let mut frames = vec![own.frame(c).to_vec()];
+                let range = RolloutRange::full(c, own.frames);
+                let ran = rollout(&gns, own, range, &device, |_, positions| {
                     frames.push(positions.to_vec());
                     Ok(())
                 });
@@ -627,15 +727,18 @@ fn write_gif<B: GnsKernels>(plan: &Plan, args: &EvalArgs) -> Result<GifRecord> {
             .collect::<Result<_>>()?;
     // From the earliest start; a model that reads more frames shows the truth until its own.
     let start = rollouts.iter().map(|(c, _)| *c).min().unwrap_or(0);
-    let renderer = DatasetRenderer::new(plan.dataset.metadata(), args.pixels_per_cell)?;
-    let kinds = DatasetRenderer::kinds(&trajectory.particle_type);
+    let renderer = DatasetRenderer::new(plan.datasets[0].metadata(), args.pixels_per_cell)?;
+    let kinds: Vec<_> = trajectories
+        .iter()
+        .map(|t| DatasetRenderer::kinds(&t.particle_type))
+        .collect();
     let background = FrameStyle::default().background;
     let mut writer: Option<GifWriter> = None;
     let mut shown = Vec::new();
     for frame in (start..trajectory.frames).step_by(args.gif_every) {
         let truth = trajectory.frame(frame);
         let mut pictures = vec![plots::captioned(
-            &renderer.render(truth, &kinds)?,
+            &renderer.render(truth, &kinds[0])?,
             &format!("ground truth, frame {frame}"),
             background,
         )?];
@@ -646,10 +749,13 @@ fn write_gif<B: GnsKernels>(plan: &Plan, args: &EvalArgs) -> Result<GifRecord> {
                     &frames[frames.len() - 1][..],
                     format!("{} (blown up)", model.label),
                 ),
-                None => (truth, format!("{} (history)", model.label)),
+                None => (
+                    trajectories[model.data].frame(frame),
+                    format!("{} (history)", model.label),
+                ),
             };
             pictures.push(plots::captioned(
-                &renderer.render(shown, &kinds)?,
+                &renderer.render(shown, &kinds[model.data])?,
                 &caption,
                 background,
             )?);
@@ -814,6 +920,14 @@ pub fn markdown_table(record: &EvalRecord) -> String {
             " {} of {} |\n",
             summary.blown_up, summary.trajectories
         ));
+    }
+    for model in &record.models {
+        if let Some(dataset) = &model.dataset {
+            text.push_str(&format!(
+                "\n{}: on {dataset} (the same scenes as {}).\n",
+                model.label, record.dataset
+            ));
+        }
     }
     text
 }
