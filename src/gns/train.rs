@@ -180,6 +180,13 @@ fn train<B: AutodiffBackend + GnsKernels>(
     let mut run = TrainingRun::<B>::open(options, &device)?;
     let total = run.config().training.steps;
     let first = run.step();
+    if first >= total {
+        println!(
+            "{}: at step {first}, the total of {total} steps is reached: nothing to train",
+            options.out.display()
+        );
+        return Ok(());
+    }
     println!(
         "{}: training {} on {} ({}), steps {first} → {total}, into {}",
         options.preset,

@@ -221,6 +221,10 @@ fn a_stopped_and_resumed_run_has_the_uninterrupted_loss_curve_bit_for_bit() {
             final_weights(&whole, 20),
             "{variant} on {backend}"
         );
+        // A total the run has reached trains nothing and changes nothing.
+        let done = ok(resume(&parts, &["--backend", backend, "--steps", "12"]));
+        assert!(done.contains("nothing to train"), "{done}");
+        assert_eq!(losses(&parts), losses(&whole), "{variant} on {backend}");
     }
 }
 
