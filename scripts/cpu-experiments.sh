@@ -8,7 +8,16 @@
 #   scripts/cpu-experiments.sh [STAGE...]     stages: data train eval (default: all three)
 #
 # PHI (default target/release/phi), DATA (default data) and RUNS (default experiments/cpu) move
-# the binary, the datasets and the training directories.
+# the binary, the datasets and the training directories. VARIANTS (default "1s 1sn 1snb 2ss 2si")
+# trains some of the variants only; Burn trains on one core, so a 2-core machine runs
+# two lanes at once, e.g.
+#   VARIANTS="1s 1sn 2ss" scripts/cpu-experiments.sh train &
+#   VARIANTS="1snb" scripts/cpu-experiments.sh train; wait; VARIANTS=2si scripts/cpu-experiments.sh train
+#
+# The budget is the same for every variant in model passes: 4,000 steps of the one-step loss, and
+# 2,000 of the two-step loss (each step two passes and their gradients), screened every 2,000 and
+# 1,000 steps, so at the same passes (STEPS_ONE and STEPS_TWO change the budget). 2si starts from
+# 1s/best, as in the thesis.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
@@ -17,7 +26,9 @@ data=${DATA:-data}
 runs=${RUNS:-experiments/cpu}
 stages=("$@")
 [ ${#stages[@]} -gt 0 ] || stages=(data train eval)
-variants=(1s 1sn 1snb 2ss 2si)
+read -r -a variants <<<"${VARIANTS:-1s 1sn 1snb 2ss 2si}"
+steps_one=${STEPS_ONE:-4000}
+steps_two=${STEPS_TWO:-2000}
 
 if [ ! -x "$phi" ]; then
     echo "$phi not found: cargo build --release --bin phi (or set PHI)" >&2
@@ -48,31 +59,35 @@ fi
 if wants train; then
     for v in "${variants[@]}"; do
         out=$runs/$v
+        case $v in
+            2ss | 2si) steps=$steps_two ;;
+            *) steps=$steps_one ;;
+        esac
         if [ -f "$out/train.json" ]; then
-            "$phi" train --resume --out "$out"
+            # The run keeps its dataset and preset; the budget is given again as the total.
+            "$phi" train --resume --out "$out" --steps "$steps"
             continue
         fi
         case $v in
             1snb) set -- --data "$data/flip-walls" ;;
-            2si) set -- --data "$data/flip" --init-from "$runs/1s/best" ;;
+            2ss) set -- --data "$data/flip" --screen-every $((steps / 2)) ;;
+            2si) set -- --data "$data/flip" --init-from "$runs/1s/best" --screen-every $((steps / 2)) ;;
             *) set -- --data "$data/flip" ;;
         esac
-        "$phi" train --config "configs/gns/cpu/$v.toml" --out "$out" "$@"
+        "$phi" train --config "configs/gns/cpu/$v.toml" --out "$out" --steps "$steps" "$@"
     done
 fi
 
 if wants eval; then
+    # Table B.1: all five on the test scenes, 1snb on their walls variant.
     models=()
-    for v in 1s 1sn 2ss 2si; do models+=(--model "$v=$runs/$v"); done
-    "$phi" eval "${models[@]}" --data "$data/flip" --split test --out "$runs/eval"
-    "$phi" eval --model "1snb=$runs/1snb" --data "$data/flip-walls" --split test \
-        --out "$runs/eval-walls"
-    # 1sn on the taller domain, its boundary features against the real walls and against the
-    # walls it was trained with.
-    "$phi" eval --model "1sn=$runs/1sn" --data "$data/tall" --split test --bounds data \
-        --out "$runs/eval-tall"
+    for v in 1s 1sn 1snb 2ss 2si; do models+=(--model "$v=$runs/$v"); done
+    "$phi" eval "${models[@]}" --data "$data/flip" --model-data "1snb=$data/flip-walls" \
+        --split test --out "$runs/eval"
+    # Fig. 5.9: 1sn with its boundary features against the taller domain's walls, 1snb with the
+    # walls as particles; then 1sn measuring the walls it was trained with.
+    "$phi" eval --model "1sn=$runs/1sn" --model "1snb=$runs/1snb" --data "$data/tall" \
+        --model-data "1snb=$data/tall-walls" --split test --bounds data --out "$runs/eval-tall"
     "$phi" eval --model "1sn=$runs/1sn" --data "$data/tall" --split test --bounds model \
         --out "$runs/eval-tall-model-walls"
-    "$phi" eval --model "1snb=$runs/1snb" --data "$data/tall-walls" --split test \
-        --out "$runs/eval-tall-walls"
 fi
