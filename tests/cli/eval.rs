@@ -67,6 +67,12 @@ fn eval_writes_tables_plots_gif_and_resumes_from_its_cache() {
     let csv = std::fs::read_to_string(out.join("table.csv")).unwrap();
     let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
     let header = &rows[0];
+    let acc_std: Vec<f64> = json(&data.join("metadata.json"))["acc_std"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(f64_of)
+        .collect();
     let column = |name: &str| header.iter().position(|h| *h == name).unwrap();
     for (m, label) in ["first", "b"].iter().enumerate() {
         let model = &record["models"][m];
@@ -75,7 +81,7 @@ fn eval_writes_tables_plots_gif_and_resumes_from_its_cache() {
         // The per-trajectory results are in the cache; the summary is their mean, and each
         // trajectory's MSE 400 is the mean of its per-frame curve.
         let mut mse400 = Vec::new();
-        let mut acc = Vec::new();
+        let (mut acc, mut acc_data) = (Vec::new(), Vec::new());
         for index in 0..3 {
             let entry = json(&out.join(format!("cache/{label}/test_{index}.json")));
             let evaluation = &entry["evaluation"];
@@ -90,6 +96,15 @@ fn eval_writes_tables_plots_gif_and_resumes_from_its_cache() {
             approx::assert_relative_eq!(f64_of(&evaluation["mse400"]), mean, max_relative = 1e-12);
             mse400.push(mean);
             acc.push(f64_of(&evaluation["mse_acc1"]));
+            // MSE-acc 1 in the dataset's normalisation, from the stored-unit errors.
+            let error: Vec<f64> = evaluation["acc_error"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(f64_of)
+                .collect();
+            assert_eq!(error.len(), 2);
+            acc_data.push((0..2).map(|a| error[a] / acc_std[a].powi(2)).sum::<f64>() / 2.0);
         }
         let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
         approx::assert_relative_eq!(
@@ -98,10 +113,17 @@ fn eval_writes_tables_plots_gif_and_resumes_from_its_cache() {
             max_relative = 1e-12
         );
         approx::assert_relative_eq!(
-            f64_of(&summary["mse_acc1"]),
+            f64_of(&summary["mse_acc1_own"]),
             mean(&acc),
             max_relative = 1e-12
         );
+        approx::assert_relative_eq!(
+            f64_of(&summary["mse_acc1"]),
+            mean(&acc_data),
+            max_relative = 1e-12
+        );
+        // Without training noise the two normalisations are one, up to f32 rounding.
+        approx::assert_relative_eq!(mean(&acc_data), mean(&acc), max_relative = 1e-4);
         // The band's mean over frames is the table's MSE 400 (the trajectories are equally long).
         let band: Vec<f64> = model["mse_band"]["mean"]
             .as_array()
@@ -141,6 +163,24 @@ fn eval_writes_tables_plots_gif_and_resumes_from_its_cache() {
     );
     assert!(again.contains("| first |"), "{again}");
     assert_eq!(std::fs::read(&cache).unwrap(), before);
+
+    // An entry from before the stored-unit one-step errors were recorded is completed with
+    // them, its other results kept: the same entry and the same table.
+    let mut old: serde_json::Value = serde_json::from_slice(&before).unwrap();
+    old["evaluation"]
+        .as_object_mut()
+        .unwrap()
+        .remove("acc_error");
+    std::fs::write(&cache, serde_json::to_vec_pretty(&old).unwrap()).unwrap();
+    ok(eval(&models, &data, &out, &options));
+    assert_eq!(
+        json(&cache),
+        serde_json::from_slice::<serde_json::Value>(&before).unwrap()
+    );
+    assert_eq!(
+        std::fs::read_to_string(out.join("table.md")).unwrap(),
+        table
+    );
 
     // Other weights under the same name: the cache is refused, naming the entry and both digests.
     ok(init(&data, &b, &["--seed", "5"]));

@@ -32,7 +32,8 @@ mod trajectory;
 
 pub use summary::{Band, ModelSummary};
 pub use trajectory::{
-    Curves, EmdCost, EvalOptions, TrajectoryEvaluation, evaluate_trajectory, mse_acc1,
+    Curves, EmdCost, EvalOptions, OneStepErrors, TrajectoryEvaluation, evaluate_trajectory,
+    mse_acc1, mse_acc1_in, one_step_errors,
 };
 
 use phi_core::point_sets::PointSetError;

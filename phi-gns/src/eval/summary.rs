@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::trajectory::TrajectoryEvaluation;
+use super::trajectory::{TrajectoryEvaluation, mse_acc1_in};
 
 /// A model's metrics averaged over the evaluated trajectories. A rollout metric is `null`
 /// (infinite) when any trajectory's rollout blew up; `blown_up` counts them.
@@ -12,8 +12,13 @@ pub struct ModelSummary {
     pub trajectories: usize,
     /// Of which whose full rollout blew up.
     pub blown_up: usize,
-    /// MSE-acc 1 (normalised acceleration units²).
+    /// MSE-acc 1 in the normalisation of the `acc_std` given to [`ModelSummary::of`] (the
+    /// evaluated dataset's: one unit for every model of a table).
     pub mse_acc1: f64,
+    /// MSE-acc 1 in the model's own normalisation (widened by its training noise), the units of
+    /// its training loss and screening.
+    #[serde(default)]
+    pub mse_acc1_own: f64,
     /// MSE 20 (stored units²).
     pub mse20: Option<f64>,
     /// MSE 400 (stored units²).
@@ -40,8 +45,10 @@ fn mean_of_all(values: impl Iterator<Item = Option<f64>>) -> Option<f64> {
 }
 
 impl ModelSummary {
-    /// The summary of `evaluations` (at least one).
-    pub fn of(evaluations: &[TrajectoryEvaluation]) -> Self {
+    /// The summary of `evaluations` (at least one), MSE-acc 1 in the normalisation of
+    /// `acc_std` (per dimension; an evaluation without `acc_error` counts its own
+    /// normalisation's value).
+    pub fn of(evaluations: &[TrajectoryEvaluation], acc_std: &[f64]) -> Self {
         let n = evaluations.len();
         let of =
             |f: fn(&TrajectoryEvaluation) -> Option<f64>| mean_of_all(evaluations.iter().map(f));
@@ -51,7 +58,18 @@ impl ModelSummary {
                 .iter()
                 .filter(|e| e.failed_step.is_some())
                 .count(),
-            mse_acc1: evaluations.iter().map(|e| e.mse_acc1).sum::<f64>() / n.max(1) as f64,
+            mse_acc1: evaluations
+                .iter()
+                .map(|e| {
+                    if e.acc_error.is_empty() {
+                        e.mse_acc1
+                    } else {
+                        mse_acc1_in(&e.acc_error, acc_std)
+                    }
+                })
+                .sum::<f64>()
+                / n.max(1) as f64,
+            mse_acc1_own: evaluations.iter().map(|e| e.mse_acc1).sum::<f64>() / n.max(1) as f64,
             mse20: of(|e| e.mse20),
             mse400: of(|e| e.mse400),
             emd: of(|e| e.emd),

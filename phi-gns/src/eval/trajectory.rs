@@ -7,9 +7,10 @@ use serde::{Deserialize, Serialize};
 use super::EvalError;
 use super::metrics::{kinetic_energy, liquid_positions, mean_neighbour_count};
 use crate::data::Trajectory;
-use crate::model::{Gns, GnsKernels, GraphBatch, ModelError};
+use crate::model::{Gns, GnsKernels, GraphBatch, ModelError, Normalisation};
 use crate::rollout::{RolloutRange, input_window, position_mse, rollout};
-use crate::train::{non_kinematic_mask, one_step_loss};
+use crate::train::loss::{counted_particles, squared_error};
+use crate::train::non_kinematic_mask;
 
 /// What an evaluation computes beyond the model and the data.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -98,9 +99,15 @@ pub struct TrajectoryEvaluation {
     pub liquid_particles: usize,
     /// The last ground-truth frame of the full rollout's input window (`C`).
     pub start: usize,
-    /// MSE-acc 1: eq. 5.1 averaged over every one-step window (normalised acceleration units²,
-    /// per dimension).
+    /// MSE-acc 1 in the model's own normalisation: eq. 5.1 averaged over every one-step window
+    /// (normalised acceleration units², per dimension; the units of its training loss, which
+    /// differ between models trained with and without noise: see [`OneStepErrors`]).
     pub mse_acc1: f64,
+    /// The one-step acceleration error per dimension in stored units (position units per
+    /// frame², squared), mean over the liquid particles and the windows: MSE-acc 1 in any
+    /// normalisation ([`mse_acc1_in`]). Empty in a cache entry written before it was recorded.
+    #[serde(default)]
+    pub acc_error: Vec<f64>,
     /// The one-step windows: latest input frames `C ..= F − 2`.
     pub acc_windows: usize,
     /// MSE 20: the mean over the short rollouts of their position MSE.
@@ -162,7 +169,7 @@ pub fn evaluate_trajectory<B: GnsKernels>(
         });
     }
 
-    let (mse_acc1, acc_windows) = mse_acc1(model, trajectory, 1, device)?;
+    let one_step = one_step_errors(model, trajectory, 1, device)?;
     let full = full_rollout(model, trajectory, &liquid, options, device)?;
     let steps = frames - 1 - c;
     let failed = full.failed_step;
@@ -220,8 +227,9 @@ pub fn evaluate_trajectory<B: GnsKernels>(
         particles: trajectory.particles,
         liquid_particles,
         start: c,
-        mse_acc1,
-        acc_windows,
+        mse_acc1: one_step.mse_acc1,
+        acc_error: one_step.acc_error,
+        acc_windows: one_step.windows,
         mse20,
         short_windows: starts.len(),
         mse400: complete.then(|| mean(&curves.mse)),
@@ -234,18 +242,64 @@ pub fn evaluate_trajectory<B: GnsKernels>(
     })
 }
 
+/// The one-step errors of a model on a trajectory.
+///
+/// A model's normalised accelerations are divided by `sqrt(acc_std² + σ²)`, DeepMind's scale
+/// widened by the model's training noise `σ`, so a model trained with noise (1sn, 1snb) measures
+/// its errors in larger units than one without (1s, 2ss, 2si): on the thesis's data the widened
+/// scale is ~1.8 times the plain one, and the same error reads ~3.2 times smaller. `acc_error`
+/// holds the error in stored units, so that models can be compared in one normalisation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OneStepErrors {
+    /// Eq. 5.1 (no noise) divided by the dimension, in the model's own normalisation, mean over
+    /// the windows.
+    pub mse_acc1: f64,
+    /// Per dimension: the squared acceleration error in stored units, mean over the
+    /// non-kinematic particles and the windows.
+    pub acc_error: Vec<f64>,
+    /// The windows.
+    pub windows: usize,
+}
+
 /// MSE-acc 1 of `model` on `trajectory`: eq. 5.1 (no noise) per window, divided by the
-/// dimension, averaged over the windows whose latest input frame is `C, C + stride, …, F − 2`.
-/// Returns the mean and the number of windows.
+/// dimension, averaged over the windows whose latest input frame is `C, C + stride, …, F − 2`,
+/// in the model's own normalisation. Returns the mean and the number of windows.
 ///
 /// # Errors
-/// Model errors; [`ModelError::Input`] for a trajectory without a window and a target.
+/// As [`one_step_errors`].
 pub fn mse_acc1<B: GnsKernels>(
     model: &Gns<B>,
     trajectory: &Trajectory,
     stride: usize,
     device: &B::Device,
 ) -> Result<(f64, usize), ModelError> {
+    one_step_errors(model, trajectory, stride, device).map(|e| (e.mse_acc1, e.windows))
+}
+
+/// MSE-acc 1 from the per-dimension stored-unit errors `acc_error` in the normalisation of
+/// `acc_std` (a dataset's, the same for every model measured): `Σ_a acc_error_a / acc_std_a² / d`.
+pub fn mse_acc1_in(acc_error: &[f64], acc_std: &[f64]) -> f64 {
+    let d = acc_error.len().max(1) as f64;
+    acc_error
+        .iter()
+        .zip(acc_std)
+        .map(|(e, s)| e / (s * s))
+        .sum::<f64>()
+        / d
+}
+
+/// The one-step errors of `model` on the windows of `trajectory` whose latest input frame is
+/// `C, C + stride, …, F − 2` ([`OneStepErrors`]).
+///
+/// # Errors
+/// Model errors; [`ModelError::Input`] for a trajectory without a window and a target, or
+/// without a non-kinematic particle.
+pub fn one_step_errors<B: GnsKernels>(
+    model: &Gns<B>,
+    trajectory: &Trajectory,
+    stride: usize,
+    device: &B::Device,
+) -> Result<OneStepErrors, ModelError> {
     let spec = model.spec();
     let c = spec.config.input_velocities;
     let frames = trajectory.frames;
@@ -258,9 +312,16 @@ pub fn mse_acc1<B: GnsKernels>(
             ),
         });
     }
+    let dim = spec.config.dim;
     let mask = non_kinematic_mask::<B>(&trajectory.particle_type, &spec.kinematic_types, device)?;
-    let dim = spec.config.dim as f64;
-    let (mut sum, mut windows) = (0.0f64, 0usize);
+    let counted: Vec<bool> = trajectory
+        .particle_type
+        .iter()
+        .map(|t| !spec.kinematic_types.contains(t))
+        .collect();
+    let scale = Normalisation::scale(&spec.normalisation.acc_std, spec.config.noise_std);
+    let (mut normalised, mut stored) = (0.0f64, vec![0.0f64; dim]);
+    let mut windows = 0usize;
     for t in (c..frames - 1).step_by(stride.max(1)) {
         let window = input_window(trajectory, t, c);
         let batch = GraphBatch::from_host(&window, &trajectory.particle_type, spec, device)?;
@@ -269,11 +330,30 @@ pub fn mse_acc1<B: GnsKernels>(
             &[trajectory.particles, trajectory.dim],
             device,
         )?;
-        let loss = one_step_loss(model, &batch, &next, &mask)?.to_scalar()?;
-        sum += f64::from(loss) / dim;
+        // Eq. 5.1 as the training loss computes it, and its errors per dimension.
+        let count = counted_particles(&batch, &mask)?;
+        let predicted = model.normalised_acceleration(&batch)?;
+        let target = model.target_acceleration(&batch, &next)?;
+        let loss = squared_error(&predicted, &target, &mask, count)?.to_scalar()?;
+        normalised += f64::from(loss) / dim as f64;
+        let (predicted, target) = (predicted.to_vec(), target.to_vec());
+        let mut per_dim = vec![0.0f64; dim];
+        for (i, _) in counted.iter().enumerate().filter(|(_, c)| **c) {
+            for (a, sum) in per_dim.iter_mut().enumerate() {
+                let e = f64::from(predicted[i * dim + a]) - f64::from(target[i * dim + a]);
+                *sum += e * e;
+            }
+        }
+        for ((s, e), k) in stored.iter_mut().zip(&per_dim).zip(&scale) {
+            *s += e * k * k / f64::from(count);
+        }
         windows += 1;
     }
-    Ok((sum / windows as f64, windows))
+    Ok(OneStepErrors {
+        mse_acc1: normalised / windows as f64,
+        acc_error: stored.iter().map(|s| s / windows as f64).collect(),
+        windows,
+    })
 }
 
 /// The position MSE of a rollout over `range`, mean over its frames; `None` when it blows up.

@@ -7,8 +7,10 @@ use phi_core::backend::ndarray::NdArray;
 use phi_core::{Backend, Tensor};
 use phi_gns::data::{LIQUID, OBSTACLE, Trajectory};
 use phi_gns::eval::metrics::{kinetic_energy, liquid_positions, mean_neighbour_count};
-use phi_gns::eval::{Band, EvalOptions, ModelSummary, evaluate_trajectory, mse_acc1};
-use phi_gns::model::{Gns, Parameters};
+use phi_gns::eval::{
+    Band, EvalOptions, ModelSummary, evaluate_trajectory, mse_acc1, mse_acc1_in, one_step_errors,
+};
+use phi_gns::model::{Gns, Normalisation, Parameters};
 use phi_gns::rollout::{RolloutRange, position_mse, rollout_positions};
 
 use crate::common::{self, Rng, perturbed};
@@ -210,12 +212,46 @@ fn a_trajectory_evaluation_agrees_with_independent_rollouts() {
     assert!(eval.density_ratio.unwrap() > 0.0);
 
     // One trajectory: the summary is its evaluation, the band its curve with zero width.
-    let summary = ModelSummary::of(std::slice::from_ref(&eval));
+    let summary = ModelSummary::of(
+        std::slice::from_ref(&eval),
+        &model.spec().normalisation.acc_std,
+    );
     assert_eq!(summary.mse400, eval.mse400);
     assert_eq!(summary.blown_up, 0);
     let band = Band::of(std::slice::from_ref(&eval), |e| &e.curves.mse);
     assert_eq!(band.mean, eval.curves.mse);
     assert_eq!(band.min, band.max);
+}
+
+#[test]
+fn one_step_errors_in_stored_units_give_mse_acc1_in_any_normalisation() {
+    // A model trained with noise σ divides its accelerations by sqrt(acc_std² + σ²): the
+    // stored-unit errors divided by that scale are its own MSE-acc 1, and divided by the
+    // dataset's acc_std the larger value that a model without noise would report.
+    let device = NdArray::default_device();
+    let mut config = common::config(16, 16, 2, 2);
+    config.noise_std = 1.5e-4;
+    let spec = common::spec(config, 3);
+    let params = Parameters::<NdArray>::init(&spec.config, spec.seed, &device);
+    let model = Gns::new(spec, perturbed(&params, 6)).unwrap();
+    let trajectory = trajectory(12);
+    let errors = one_step_errors(&model, &trajectory, 1, &device).unwrap();
+    assert_eq!(
+        (errors.mse_acc1, errors.windows),
+        mse_acc1(&model, &trajectory, 1, &device).unwrap()
+    );
+    let plain = &model.spec().normalisation.acc_std;
+    let widened = Normalisation::scale(plain, model.spec().config.noise_std);
+    approx::assert_relative_eq!(
+        mse_acc1_in(&errors.acc_error, &widened),
+        errors.mse_acc1,
+        max_relative = 1e-5
+    );
+    // acc_std = (1.1, 0.8)·1e-4 and σ = 1.5e-4: per dimension the plain normalisation reads
+    // (1.1² + 1.5²) / 1.1² = 2.86 and (0.8² + 1.5²) / 0.8² = 4.52 times more, so the whole
+    // between the two.
+    let ratio = mse_acc1_in(&errors.acc_error, plain) / errors.mse_acc1;
+    assert!((2.859..4.516).contains(&ratio), "{ratio}");
 }
 
 #[test]
@@ -239,7 +275,10 @@ fn a_blown_up_rollout_makes_the_rollout_metrics_infinite() {
     assert!(eval.curves.mse.is_empty());
 
     let fine = evaluate_trajectory(&model, &trajectory, &EvalOptions::new(0.015), &device).unwrap();
-    let summary = ModelSummary::of(&[fine.clone(), eval.clone()]);
+    let summary = ModelSummary::of(
+        &[fine.clone(), eval.clone()],
+        &model.spec().normalisation.acc_std,
+    );
     assert_eq!(
         (summary.blown_up, summary.mse400, summary.emd),
         (1, None, None)

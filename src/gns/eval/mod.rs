@@ -28,6 +28,7 @@ use anyhow::{Context, Result, bail};
 use phi_gns::data::{Dataset, METADATA_FILE};
 use phi_gns::eval::{
     Band, EmdCost, EvalOptions, ModelSummary, TrajectoryEvaluation, evaluate_trajectory,
+    one_step_errors,
 };
 use phi_gns::model::{
     Gns, GnsKernels, MODEL_FILE, ModelError, ModelSpec, WEIGHTS_FILE, load_model, read_spec,
@@ -573,7 +574,11 @@ pub fn run(args: EvalArgs) -> Result<()> {
     write_json(&args.out.join(RECORD_FILE), &record)?;
     let evaluations = crate::with_backend!(kind, B => evaluate_all::<B>(&plan, &args))?;
     for (model, evals) in record.models.iter_mut().zip(&evaluations) {
-        model.summary = Some(ModelSummary::of(evals));
+        // MSE-acc 1 in one normalisation for every model: the (first) dataset's.
+        model.summary = Some(ModelSummary::of(
+            evals,
+            &plan.datasets[0].metadata().acc_std,
+        ));
         model.mse_band = Some(Band::of(evals, |e| &e.curves.mse));
         model.emd_band = Some(Band::of(evals, |e| &e.curves.emd));
     }
@@ -632,14 +637,26 @@ fn evaluate_all<B: GnsKernels>(
         for (k, &index) in plan.indices.iter().enumerate() {
             let path = dir.join(cache_file_name(&args.split, index));
             match read_cache(&path, model, &args.split, &plan.options)? {
+                // An entry from before the stored-unit one-step errors were recorded: only they
+                // are computed.
+                Some(entry) if entry.evaluation.acc_error.is_empty() => {
+                    todo.push((m, k, index, path, Some(entry)));
+                }
                 Some(entry) => results[m][k] = Some(entry.evaluation),
-                None => todo.push((m, k, index, path)),
+                None => todo.push((m, k, index, path, None)),
             }
         }
     }
     let cached = plan.models.len() * plan.indices.len() - todo.len();
     if cached > 0 {
         tracing::info!(cached, "reusing cached trajectory evaluations");
+    }
+    let completed = todo.iter().filter(|t| t.4.is_some()).count();
+    if completed > 0 {
+        tracing::info!(
+            completed,
+            "adding the one-step errors in stored units to cached evaluations"
+        );
     }
     let bar = crate::progress::step_bar(
         todo.len(),
@@ -648,26 +665,45 @@ fn evaluate_all<B: GnsKernels>(
     bar.set_message("trajectories");
     let done = Mutex::new(Vec::with_capacity(todo.len()));
     todo.par_iter()
-        .map(|(m, k, index, path)| -> Result<()> {
+        .map(|(m, k, index, path, earlier)| -> Result<()> {
             let model = &plan.models[*m];
             let device = B::default_device();
             let gns = model.load::<B>(&device)?;
             let dataset = &plan.datasets[model.data];
             let (trajectory, _) = dataset.read_with_stats(&args.split, *index)?;
-            let evaluation = evaluate_trajectory(&gns, &trajectory, &plan.options, &device)
-                .with_context(|| {
-                    format!(
-                        "evaluating {} on trajectory {index} of '{}'",
-                        model.label, args.split
-                    )
-                })?;
-            let entry = CacheEntry {
-                format: CACHE_FORMAT.to_string(),
-                model: model.dir.display().to_string(),
-                digest: model.digest.clone(),
-                split: args.split.clone(),
-                options: plan.options,
-                evaluation,
+            let context = || {
+                format!(
+                    "evaluating {} on trajectory {index} of '{}'",
+                    model.label, args.split
+                )
+            };
+            let entry = match earlier {
+                Some(earlier) => {
+                    let mut entry = earlier.clone();
+                    let errors =
+                        one_step_errors(&gns, &trajectory, 1, &device).with_context(context)?;
+                    // The same weights and data give the same value up to the order of sums.
+                    let before = entry.evaluation.mse_acc1;
+                    if (errors.mse_acc1 - before).abs() > 1e-4 * before.abs().max(1e-30) {
+                        bail!(
+                            "{}: its MSE-acc 1 ({}) is not what the model computes now ({}):                              delete the entry to recompute it",
+                            path.display(),
+                            entry.evaluation.mse_acc1,
+                            errors.mse_acc1
+                        );
+                    }
+                    entry.evaluation.acc_error = errors.acc_error;
+                    entry
+                }
+                None => CacheEntry {
+                    format: CACHE_FORMAT.to_string(),
+                    model: model.dir.display().to_string(),
+                    digest: model.digest.clone(),
+                    split: args.split.clone(),
+                    options: plan.options,
+                    evaluation: evaluate_trajectory(&gns, &trajectory, &plan.options, &device)
+                        .with_context(context)?,
+                },
             };
             if let Some(parent) = path.parent() {
                 std::fs::create_dir_all(parent)
