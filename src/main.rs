@@ -19,12 +19,16 @@ use phi::{with_autodiff_backend, with_backend};
     about = "Differentiable liquid simulation and learned simulators",
     after_help = "Logging goes to stderr at level info; set RUST_LOG to change it, e.g. \
                   RUST_LOG=warn (quieter), RUST_LOG=debug, or RUST_LOG=phi_gns=debug (one crate). \
-                  Progress bars are drawn only when stderr is a terminal."
+                  Progress bars are drawn only when stderr is a terminal, and not with -q."
 )]
 struct Cli {
     /// On an error, also print where in the program it arose (a backtrace).
     #[arg(short, long, global = true)]
     verbose: bool,
+    /// Print results and errors only: no progress bars, and log warnings only (unless RUST_LOG
+    /// is set).
+    #[arg(short, long, global = true)]
+    quiet: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -108,9 +112,11 @@ fn main() -> ExitCode {
         // environment while it changes.
         unsafe { std::env::set_var("RUST_LIB_BACKTRACE", "1") };
     }
+    phi::progress::set_quiet(cli.quiet);
+    let level = if cli.quiet { "warn" } else { "info" };
     tracing_subscriber::fmt()
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| level.into()),
         )
         .with_writer(std::io::stderr)
         .init();

@@ -1,12 +1,27 @@
 //! Progress bars: of step-by-step runs (`phi simulate`, `phi rollout`) and of work over
 //! trajectories (`phi dataset export`, `import`, `stats`).
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use indicatif::{ProgressBar, ProgressStyle};
+
+/// Set by `phi -q`: no bar is drawn, whatever the callers pass.
+static QUIET: AtomicBool = AtomicBool::new(false);
+
+/// Hides every progress bar made from now on (`phi --quiet`).
+pub fn set_quiet(quiet: bool) {
+    QUIET.store(quiet, Ordering::Relaxed);
+}
+
+/// Whether a bar that the caller would `show` is drawn.
+fn drawn(show: bool) -> bool {
+    show && !QUIET.load(Ordering::Relaxed)
+}
 
 /// A bar of `steps` steps on stderr, or a hidden one unless `show` (callers pass whether stderr
 /// is a terminal).
 pub fn step_bar(steps: usize, show: bool) -> ProgressBar {
-    if !show {
+    if !drawn(show) {
         return ProgressBar::hidden();
     }
     let bar = ProgressBar::new(steps as u64);
@@ -22,7 +37,7 @@ pub fn step_bar(steps: usize, show: bool) -> ProgressBar {
 
 /// A bar of `len` items (`unit`, e.g. "trajectories") on stderr, or a hidden one unless `show`.
 pub fn count_bar(len: usize, unit: &str, show: bool) -> ProgressBar {
-    if !show {
+    if !drawn(show) {
         return ProgressBar::hidden();
     }
     let bar = ProgressBar::new(len as u64);
@@ -34,5 +49,17 @@ pub fn count_bar(len: usize, unit: &str, show: bool) -> ProgressBar {
             .expect("a valid template")
             .progress_chars("=> "),
     );
+    bar
+}
+
+/// A counter of items (`unit`) whose total is not known in advance, or a hidden one unless
+/// `show`.
+pub fn counter(unit: &str, show: bool) -> ProgressBar {
+    if !drawn(show) {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new_spinner();
+    let template = format!("{{spinner}} {{elapsed_precise}} {{pos}} {unit}, {{per_sec}} {{msg}}");
+    bar.set_style(ProgressStyle::with_template(&template).expect("a valid template"));
     bar
 }

@@ -201,6 +201,7 @@ pub fn run(command: DatasetCommand) -> Result<()> {
                 radius,
                 limit,
                 out: out.clone(),
+                progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
             })?;
             print!("{}", format_report(&report, &dir, radius, print_every));
             if let Some(out) = out {
@@ -256,7 +257,12 @@ pub fn run(command: DatasetCommand) -> Result<()> {
         DatasetCommand::Import { input, out, force } => {
             let staging = prepare_output(&out, force)?;
             let imported = (|| -> Result<()> {
-                phi_gns::data::tfrecord::import_tfrecord(&input, &staging)?;
+                let bar = crate::progress::counter(
+                    "trajectories imported",
+                    std::io::IsTerminal::is_terminal(&std::io::stderr()),
+                );
+                phi_gns::data::tfrecord::import_tfrecord_with(&input, &staging, &|| bar.inc(1))?;
+                bar.finish_and_clear();
                 phi_io::publish_dir(&staging, &out)?;
                 Ok(())
             })();

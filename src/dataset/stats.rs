@@ -32,6 +32,8 @@ pub struct StatsOptions {
     pub limit: usize,
     /// Where to draw the plot, if anywhere.
     pub out: Option<PathBuf>,
+    /// Draw a progress bar over the trajectories on stderr.
+    pub progress: bool,
 }
 
 /// Smallest, mean and largest of a count over trajectories.
@@ -136,15 +138,18 @@ pub fn dataset_stats(options: &StatsOptions) -> Result<StatsReport> {
         .iter()
         .map(|&[lo, hi]| [lo as f32, hi as f32])
         .collect();
+    let bar = crate::progress::count_bar(count, "trajectories", options.progress);
     let per_trajectory: Vec<(usize, usize, Vec<Vec<u64>>)> = (0..count)
         .into_par_iter()
         .map(|index| -> Result<_> {
             let (trajectory, _) = dataset.read_with_stats(&split, index)?;
             let liquid = trajectory.liquid_particles();
             let histogram = neighbour_histogram(&trajectory, &bounds, options.radius);
+            bar.inc(1);
             Ok((liquid, trajectory.particles - liquid, histogram))
         })
         .collect::<Result<_>>()?;
+    bar.finish_and_clear();
 
     let liquid: Vec<usize> = per_trajectory.iter().map(|t| t.0).collect();
     let obstacle: Vec<usize> = per_trajectory.iter().map(|t| t.1).collect();

@@ -166,6 +166,42 @@ fn resume_remakes_damaged_files_and_removes_stale_temporary_files() {
 }
 
 #[test]
+fn quiet_keeps_the_results_and_drops_the_log() {
+    if !Path::new("/proc/self").exists() {
+        return; // stale temporary files are recognised through /proc
+    }
+    let dir = scratch("faults-quiet");
+    let data = dir.join("data");
+    ok(generate(&data, "train", 1, &[]));
+    let stale = data.join("train/.traj_00000.npz.tmp-4194305");
+    // Removing a killed run's temporary file is logged at info level, and said in the summary.
+    std::fs::write(&stale, b"").unwrap();
+    let loud = generate(&data, "train", 1, &[]);
+    assert!(String::from_utf8_lossy(&loud.stderr).contains("left by a killed run"));
+    std::fs::write(&stale, b"").unwrap();
+    let quiet = phi()
+        .args([
+            "-q", "dataset", "generate", "--steps", "2", "--split", "train",
+        ])
+        .args(["--count", "1", "--out"])
+        .arg(&data)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&quiet.stderr).into_owned();
+    let stdout = ok(quiet);
+    assert!(
+        !stderr.contains("left by a killed run") && !stderr.contains("INFO"),
+        "{stderr}"
+    );
+    assert!(
+        stdout.contains("removed 1 stale temporary file(s)"),
+        "{stdout}"
+    );
+    assert!(!stale.exists());
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
 fn a_smaller_count_is_refused_unless_forced() {
     let dir = scratch("faults-count");
     let data = dir.join("data");

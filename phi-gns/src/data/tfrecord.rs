@@ -657,6 +657,19 @@ fn keep_foreign_keys(metadata: &mut Metadata, keys: serde_json::Map<String, serd
 /// `metadata.json` (`phi dataset import` imports into a staging directory and moves it into place
 /// only when complete).
 pub fn import_tfrecord(in_dir: &Path, out_dir: &Path) -> Result<Dataset, DataError> {
+    import_tfrecord_with(in_dir, out_dir, &|| {})
+}
+
+/// [`import_tfrecord`], calling `imported` after each trajectory is written (a progress bar's
+/// tick).
+///
+/// # Errors
+/// As [`import_tfrecord`].
+pub fn import_tfrecord_with(
+    in_dir: &Path,
+    out_dir: &Path,
+    imported: &dyn Fn(),
+) -> Result<Dataset, DataError> {
     if let Ok(mut entries) = std::fs::read_dir(out_dir)
         && entries.next().is_some()
     {
@@ -709,6 +722,7 @@ pub fn import_tfrecord(in_dir: &Path, out_dir: &Path) -> Result<Dataset, DataErr
                 &traj,
                 &stats,
             )?;
+            imported();
             count += 1;
         }
         if ours && metadata.splits.get(split) != Some(&count) {
