@@ -163,15 +163,12 @@ fn dataset_to_tfrecord_to_dataset_is_identical() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-#[test]
-fn deepmind_metadata_imports_with_its_own_statistics() {
-    let dir = temp_dir("tfrecord-deepmind");
-    let (original, records, imported) = (dir.join("a"), dir.join("tf"), dir.join("b"));
-    write_sample_dataset(&original, &[("train", 2), ("valid", 1)], 5, 2);
-    export_tfrecord(&Dataset::open(&original).unwrap(), &records).unwrap();
-    let deepmind = serde_json::json!({
+/// A `metadata.json` as DeepMind writes it (no splits, seeds or position scale), for
+/// trajectories of `sequence_length + 1` frames in 2D.
+fn deepmind_metadata(sequence_length: usize) -> serde_json::Value {
+    serde_json::json!({
         "bounds": [[0.1, 0.9], [0.1, 0.9]],
-        "sequence_length": 4,
+        "sequence_length": sequence_length,
         "default_connectivity_radius": 0.015,
         "dim": 2,
         "dt": 0.0025,
@@ -179,7 +176,16 @@ fn deepmind_metadata_imports_with_its_own_statistics() {
         "vel_std": [1e-3, 1e-3],
         "acc_mean": [0.0, -1e-5],
         "acc_std": [1e-4, 1e-4],
-    });
+    })
+}
+
+#[test]
+fn deepmind_metadata_imports_with_its_own_statistics() {
+    let dir = temp_dir("tfrecord-deepmind");
+    let (original, records, imported) = (dir.join("a"), dir.join("tf"), dir.join("b"));
+    write_sample_dataset(&original, &[("train", 2), ("valid", 1)], 5, 2);
+    export_tfrecord(&Dataset::open(&original).unwrap(), &records).unwrap();
+    let deepmind = deepmind_metadata(4);
     std::fs::write(records.join("metadata.json"), deepmind.to_string()).unwrap();
     let back = import_tfrecord(&records, &imported).unwrap();
     let m = back.metadata();
@@ -258,5 +264,51 @@ fn damaged_and_truncated_records_name_the_file_and_record() {
             "{len}: {msg}"
         );
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn records_whose_keys_are_not_their_positions_import_in_file_order_with_the_keys_kept() {
+    // DeepMind's reader ignores the `key` feature, so a file whose records are not keyed 0, 1, …
+    // (here the train records in reverse order: keys 2, 1, 0) is a valid dataset.
+    let dir = temp_dir("tfrecord-foreign-keys");
+    let (original, records, imported) = (dir.join("a"), dir.join("tf"), dir.join("b"));
+    let written = write_sample_dataset(&original, &[("train", 3), ("test", 1)], 5, 2);
+    export_tfrecord(&Dataset::open(&original).unwrap(), &records).unwrap();
+    let path = tfrecord_path(&records, "train");
+    let mut reader = RecordReader::open(&path).unwrap();
+    let mut all = Vec::new();
+    while let Some(record) = reader.next_record().unwrap() {
+        all.push(record);
+    }
+    let mut file = std::fs::File::create(&path).unwrap();
+    for record in all.iter().rev() {
+        write_record(&mut file, record).unwrap();
+    }
+    drop(file);
+    // DeepMind's metadata, which has no split seeds to check the stored ones against.
+    let deepmind = deepmind_metadata(4);
+    std::fs::write(records.join("metadata.json"), deepmind.to_string()).unwrap();
+
+    let back = import_tfrecord(&records, &imported).unwrap();
+    let read: Vec<Trajectory> = back.split("train").unwrap().map(Result::unwrap).collect();
+    assert_eq!(read.len(), 3);
+    for (i, (got, want)) in read.iter().zip(written[0].iter().rev()).enumerate() {
+        assert_eq!(got.index, i, "trajectory i is record i");
+        assert_eq!(
+            (&got.position, &got.particle_type),
+            (&want.position, &want.particle_type)
+        );
+        assert_eq!(
+            got.seed, want.seed,
+            "the stored seed travels with its record"
+        );
+    }
+    let keys = &back.metadata().generator["tfrecord_keys"];
+    assert_eq!(keys["train"], serde_json::json!([2, 1, 0]));
+    assert!(
+        keys.get("test").is_none(),
+        "in-order keys are not stored: {keys}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
