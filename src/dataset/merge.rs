@@ -78,16 +78,12 @@ pub fn merge(out: &Path, shards: &[PathBuf]) -> Result<MergeSummary> {
         bail!("{} is not empty and holds no phi dataset", out.display());
     }
 
-    let mut summary = MergeSummary {
-        counts: counts.clone(),
-        files: 0,
-    };
+    // Every source is found before anything is written, so a merge that cannot finish (a shard
+    // not run yet) leaves `out` as it was.
+    let mut pairs = Vec::new();
     for (split, &count) in &counts {
-        let dir = out.join(split);
-        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
         for index in 0..count {
             let name = trajectory_file_name(index);
-            let target = dir.join(&name);
             let source = shards
                 .iter()
                 .map(|s| s.join(split).join(&name))
@@ -97,10 +93,20 @@ pub fn merge(out: &Path, shards: &[PathBuf]) -> Result<MergeSummary> {
                         "no shard holds {split}/{name}: run the missing shard (or resume it) first"
                     )
                 })?;
-            link_or_copy(&source, &target)?;
-            summary.files += 1;
+            pairs.push((source, out.join(split).join(&name)));
         }
     }
+    for split in counts.keys() {
+        let dir = out.join(split);
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    for (source, target) in &pairs {
+        link_or_copy(source, target)?;
+    }
+    let summary = MergeSummary {
+        counts: counts.clone(),
+        files: pairs.len(),
+    };
     let manifest = Manifest {
         config: config.clone(),
         shard: Shard::default(),

@@ -143,11 +143,15 @@ fn merged_shards_equal_an_unsharded_run() {
         "a shard is not a dataset"
     );
     let merged = dir.join("merged");
-    // A missing shard is an error naming the trajectory.
+    // A missing shard is an error naming the trajectory, and nothing is written.
     let output = run(&["dataset", "merge"], &[&merged, &a]);
     assert!(!output.status.success());
     assert!(String::from_utf8_lossy(&output.stderr).contains("traj_00001.npz"));
-    let _ = std::fs::remove_dir_all(&merged);
+    assert!(
+        !merged.exists(),
+        "a failed merge wrote into {}",
+        merged.display()
+    );
     ok(run(&["dataset", "merge"], &[&merged, &a, &b]));
     assert_eq!(files(&whole), files(&merged));
     let (mw, mm) = (
