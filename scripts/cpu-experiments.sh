@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # The thesis's learning experiments at CPU scale (docs/gns.md, "Experiments at CPU scale"):
 # generates the datasets, trains the five configs/gns/cpu presets one after another, then
-# evaluates them on the test scenes and on the taller domain of fig. 5.9. Every stage resumes:
+# evaluates them on the test scenes and on the taller domain of fig. 5.9, and solves the inverse
+# problem of thesis section 4.3 through FLIP and through two of the models. Every stage resumes:
 # run the script again after a stop, a kill or a new sitting and it goes on where it was (a
 # training run from its newest checkpoint, bit for bit).
 #
-#   scripts/cpu-experiments.sh [STAGE...]     stages: data train eval (default: all three)
+#   scripts/cpu-experiments.sh [STAGE...]     stages: data train eval optimize (default: all)
 #
 # PHI (default target/release/phi), DATA (default data) and RUNS (default experiments/cpu) move
 # the binary, the datasets and the training directories. VARIANTS (default "1s 1sn 1snb 2ss 2si")
@@ -25,7 +26,7 @@ phi=${PHI:-target/release/phi}
 data=${DATA:-data}
 runs=${RUNS:-experiments/cpu}
 stages=("$@")
-[ ${#stages[@]} -gt 0 ] || stages=(data train eval)
+[ ${#stages[@]} -gt 0 ] || stages=(data train eval optimize)
 read -r -a variants <<<"${VARIANTS:-1s 1sn 1snb 2ss 2si}"
 steps_one=${STEPS_ONE:-4000}
 steps_two=${STEPS_TWO:-2000}
@@ -90,4 +91,18 @@ if wants eval; then
         --model-data "1snb=$data/tall-walls" --split test --bounds data --out "$runs/eval-tall"
     "$phi" eval --model "1sn=$runs/1sn" --data "$data/tall" --split test --bounds model \
         --out "$runs/eval-tall-model-walls"
+fi
+
+if wants optimize; then
+    # Thesis fig. 4.5's problem through FLIP and through the 1s and 2si models (Burn, CPU); a run
+    # with its summary.json is done.
+    problem=scenes/optimize/two_spheres.toml
+    optimize() {
+        local out=$runs/optimize/$1
+        shift
+        [ -f "$out/summary.json" ] || "$phi" optimize "$problem" --out "$out" --backend burn "$@"
+    }
+    optimize flip
+    optimize gns-1s --simulator gns --model "$runs/1s/best"
+    optimize gns-2si --simulator gns --model "$runs/2si/best"
 fi
