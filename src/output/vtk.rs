@@ -144,10 +144,16 @@ fn data_array(
     block.extend_from_slice(&(bytes.len() as u64).to_le_bytes());
     block.extend_from_slice(bytes);
     let name = name.map(|n| format!(" Name=\"{n}\"")).unwrap_or_default();
+    // One component is VTK's default, and VTK's own writers leave it unsaid: readers such as
+    // meshio then read a scalar as `[n]`, not `[n, 1]`.
+    let components = if components == 1 {
+        String::new()
+    } else {
+        format!(" NumberOfComponents=\"{components}\"")
+    };
     let _ = writeln!(
         out,
-        "        <DataArray type=\"{vtk_type}\"{name} NumberOfComponents=\"{components}\" \
-         format=\"binary\">{}</DataArray>",
+        "        <DataArray type=\"{vtk_type}\"{name}{components} format=\"binary\">{}</DataArray>",
         STANDARD.encode(&block)
     );
 }
@@ -271,6 +277,11 @@ mod tests {
             [3.0, 4.0, 0.0, 0.0, -1.5, 0.0]
         );
         assert_eq!(f32s(&array_bytes(&vtu, "speed")), [5.0, 1.5]);
+        // Vectors say their components; scalars leave VTK's default of one unsaid, so that
+        // readers (meshio) read them as `[n]`.
+        assert!(vtu.contains("Name=\"velocity\" NumberOfComponents=\"3\""));
+        assert!(vtu.contains("Name=\"speed\" format=\"binary\""));
+        assert!(vtu.contains("Name=\"particle_type\" format=\"binary\""));
         let types = array_bytes(&vtu, "particle_type");
         assert_eq!(types, [1i32.to_le_bytes(), 0i32.to_le_bytes()].concat());
         let offsets = array_bytes(&vtu, "offsets");
