@@ -154,6 +154,13 @@ pub fn run(args: OptimizeArgs) -> Result<()> {
         summary.wasserstein[1],
         args.out.display()
     );
+    if let Some(check) = &summary.flip_check {
+        println!(
+            "the initial positions simulated with FLIP: Chamfer distance to the target {:.3} -> \
+             {:.3}, earth mover's {:.3} -> {:.3} cells",
+            check.chamfer[0], check.chamfer[1], check.wasserstein[0], check.wasserstein[1]
+        );
+    }
     Ok(())
 }
 
@@ -207,6 +214,19 @@ pub struct OptimizeSummary {
     pub seconds_per_iteration: f64,
     /// Why the run stopped early, if it did.
     pub stopped: Option<String>,
+    /// Through a learned simulator: the first and the last iteration's initial positions
+    /// simulated with FLIP, measured against the target (does the optimum the model found
+    /// solve the physical problem?); `None` for FLIP runs.
+    pub flip_check: Option<FlipCheck>,
+}
+
+/// The initial positions of a run through a learned simulator, simulated with FLIP.
+#[derive(Debug, Clone, Serialize)]
+pub struct FlipCheck {
+    /// Chamfer distance of FLIP's end state to the target, first and last iteration.
+    pub chamfer: [f32; 2],
+    /// Earth mover's estimate (`√(2 S_ε)`, ε = 0.01) to the target, first and last iteration.
+    pub wasserstein: [f32; 2],
 }
 
 /// Runs the optimisation of `config` on backend `B` and writes the outputs.
@@ -328,6 +348,26 @@ pub fn optimize<B: AutodiffBackend + LatticeKernels + GnsKernels>(
     let distances = |r: &IterationRecord| set_distances(&r.final_positions, &target, d);
     let (before, after) = (distances(first)?, distances(last)?);
     let converged_at = convergence_iteration(&losses);
+    let flip_check = match &gns {
+        Some(_) => {
+            let through_flip = |r: &IterationRecord| -> Result<_> {
+                let initial = phi_core::Tensor::<B>::from_vec(
+                    r.initial_positions.clone(),
+                    &[r.initial_positions.len() / d, d],
+                    &device,
+                )?;
+                let end = Forward::run(&problem, &initial)
+                    .with_context(|| format!("{origin}: simulating the optimum with FLIP"))?;
+                Ok(set_distances(&end.to_vec(), &target, d)?)
+            };
+            let (before, after) = (through_flip(first)?, through_flip(last)?);
+            Some(FlipCheck {
+                chamfer: [before.chamfer, after.chamfer],
+                wasserstein: [before.wasserstein, after.wasserstein],
+            })
+        }
+        None => None,
+    };
     let summary = OptimizeSummary {
         backend: B::name().to_string(),
         simulator: match &gns {
@@ -344,6 +384,7 @@ pub fn optimize<B: AutodiffBackend + LatticeKernels + GnsKernels>(
         rms_distance: [first.rms_distance, last.rms_distance],
         seconds_per_iteration: elapsed / records.len().max(1) as f64,
         stopped: outcome.stopped.as_ref().map(ToString::to_string),
+        flip_check,
     };
     let json = serde_json::json!({ "config": config, "summary": summary });
     write_atomic(&out.join("summary.json"), |w| -> Result<(), OutputError> {

@@ -214,6 +214,27 @@ fn optimize_through_a_gns_runs_and_refuses_a_model_of_other_bounds() {
             .unwrap()
             .starts_with("gns ")
     );
+    // The optimum found through the model is simulated with FLIP: its first iteration's initial
+    // positions are the initial guess, whose FLIP end state a FLIP run measures the same.
+    assert!(stdout.contains("simulated with FLIP"), "{stdout}");
+    let check = &summary["summary"]["flip_check"];
+    let flip_out = dir.join("flip");
+    ok(phi()
+        .arg("optimize")
+        .arg(&config)
+        .arg("--out")
+        .arg(&flip_out)
+        .args(["--backend", "burn", "--iterations", "1"])
+        .output()
+        .unwrap());
+    let flip: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(flip_out.join("summary.json")).unwrap())
+            .unwrap();
+    assert!(flip["summary"]["flip_check"].is_null());
+    for key in ["chamfer", "wasserstein"] {
+        assert_eq!(check[key][0], flip["summary"][key][0], "{key}");
+        assert!(check[key][1].as_f64().unwrap().is_finite(), "{key}");
+    }
 
     let other = tiny_model(&dir.join("other"), [0.0, 1.0]);
     let message = failed(
