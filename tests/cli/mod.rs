@@ -169,3 +169,84 @@ fn bad_scenes_exit_nonzero_naming_file_and_key() {
     assert!(String::from_utf8_lossy(&output.stderr).contains("cuda"));
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// The decoded bytes of the inline binary data array `name` of a `.vtu` document (a UInt64
+/// byte count, then the data).
+fn vtu_array(vtu: &str, name: &str) -> Vec<u8> {
+    use base64::Engine;
+    let tag = format!("Name=\"{name}\"");
+    let at = vtu.find(&tag).unwrap_or_else(|| panic!("no array {name}"));
+    let start = at + vtu[at..].find('>').unwrap() + 1;
+    let end = start + vtu[start..].find("</DataArray>").unwrap();
+    let block = base64::engine::general_purpose::STANDARD
+        .decode(&vtu[start..end])
+        .unwrap();
+    let (count, data) = block.split_at(8);
+    assert_eq!(
+        u64::from_le_bytes(count.try_into().unwrap()) as usize,
+        data.len()
+    );
+    data.to_vec()
+}
+
+#[test]
+fn simulate_writes_a_vtk_series() {
+    let dir = scratch("simulate-vtk");
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/small32.toml");
+    let out = dir.join("run");
+    ok(phi()
+        .args(["simulate", scene, "--out"])
+        .arg(&out)
+        .args(["--steps", "4", "--frame-every", "0", "--vtk-every", "2"])
+        .output()
+        .unwrap());
+    // The collection lists frames 0, 2 and 4 at their times (dt = 0.05 in small32.toml).
+    let pvd = std::fs::read_to_string(out.join("simulation.pvd")).unwrap();
+    let files: Vec<&str> = pvd
+        .lines()
+        .filter(|l| l.contains("<DataSet"))
+        .map(|l| {
+            let at = l.find("file=\"").unwrap() + 6;
+            &l[at..at + l[at..].find('"').unwrap()]
+        })
+        .collect();
+    assert_eq!(
+        files,
+        [
+            "vtk/frame_00000.vtu",
+            "vtk/frame_00002.vtu",
+            "vtk/frame_00004.vtu"
+        ],
+        "{pvd}"
+    );
+    let arrays = read_npz(out.join("trajectory.npz")).unwrap();
+    let positions = &arrays.iter().find(|(k, _)| k == "positions").unwrap().1;
+    let (n, d) = (positions.shape[1], positions.shape[2]);
+    let values = positions.as_f32().unwrap();
+    for (k, file) in files.iter().enumerate() {
+        let vtu = std::fs::read_to_string(out.join(file)).unwrap();
+        assert!(vtu.contains(&format!("NumberOfPoints=\"{n}\"")), "{file}");
+        // The points are the trajectory's positions, padded with z = 0.
+        let points: Vec<f32> = vtu_array(&vtu, "Points")
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+            .collect();
+        let frame = &values[2 * k * n * d..(2 * k + 1) * n * d];
+        let padded: Vec<f32> = frame.chunks(d).flat_map(|p| [p[0], p[1], 0.0]).collect();
+        assert_eq!(points, padded, "{file}");
+        // Speed is |velocity|, per particle.
+        let floats = |name: &str| -> Vec<f32> {
+            vtu_array(&vtu, name)
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+                .collect()
+        };
+        let (velocity, speed) = (floats("velocity"), floats("speed"));
+        assert_eq!(speed.len(), n);
+        for (v, s) in velocity.chunks(3).zip(&speed) {
+            let norm = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            assert!((norm - s).abs() <= 1e-6 * norm.max(1.0), "{norm} {s}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(dir);
+}
