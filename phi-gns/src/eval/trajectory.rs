@@ -314,11 +314,7 @@ pub fn one_step_errors<B: GnsKernels>(
     }
     let dim = spec.config.dim;
     let mask = non_kinematic_mask::<B>(&trajectory.particle_type, &spec.kinematic_types, device)?;
-    let counted: Vec<bool> = trajectory
-        .particle_type
-        .iter()
-        .map(|t| !spec.kinematic_types.contains(t))
-        .collect();
+    let counted = mask.to_vec();
     let scale = Normalisation::scale(&spec.normalisation.acc_std, spec.config.noise_std);
     let (mut normalised, mut stored) = (0.0f64, vec![0.0f64; dim]);
     let mut windows = 0usize;
@@ -338,7 +334,7 @@ pub fn one_step_errors<B: GnsKernels>(
         normalised += f64::from(loss) / dim as f64;
         let (predicted, target) = (predicted.to_vec(), target.to_vec());
         let mut per_dim = vec![0.0f64; dim];
-        for (i, _) in counted.iter().enumerate().filter(|(_, c)| **c) {
+        for (i, _) in counted.iter().enumerate().filter(|(_, m)| **m > 0.0) {
             for (a, sum) in per_dim.iter_mut().enumerate() {
                 let e = f64::from(predicted[i * dim + a]) - f64::from(target[i * dim + a]);
                 *sum += e * e;

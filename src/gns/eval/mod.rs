@@ -686,7 +686,8 @@ fn evaluate_all<B: GnsKernels>(
                     let before = entry.evaluation.mse_acc1;
                     if (errors.mse_acc1 - before).abs() > 1e-4 * before.abs().max(1e-30) {
                         bail!(
-                            "{}: its MSE-acc 1 ({}) is not what the model computes now ({}):                              delete the entry to recompute it",
+                            "{}: its MSE-acc 1 ({}) is not what the model computes now ({}): \
+                             delete the entry to recompute it",
                             path.display(),
                             entry.evaluation.mse_acc1,
                             errors.mse_acc1
