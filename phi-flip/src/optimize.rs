@@ -360,7 +360,7 @@ impl OptimizeConfig {
         }
         if m > n {
             // A seeded choice of n points, kept in seeding order.
-            let mut rng = rand::rngs::StdRng::seed_from_u64(s.seed.wrapping_add(2000));
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(s.seed.wrapping_add(2000));
             let mut chosen = sample(&mut rng, m, n).into_vec();
             chosen.sort_unstable();
             points = chosen

@@ -40,7 +40,7 @@
 use phi_core::backend::Host;
 use phi_core::fields::{Boundary, Domain};
 use phi_geom::{Geometry, Obstacle, Rotation};
-use rand::rngs::StdRng;
+use rand_chacha::ChaCha8Rng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
@@ -430,7 +430,7 @@ pub fn generate_random_scene(
     let domain = params.domain()?;
     let [nx, ny] = params.resolution;
     let wall = variant.wall();
-    let mut rng = StdRng::seed_from_u64(seed);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
 
     // The choices, kept over redraws.
     let has_pool = rng.random_bool(params.pool_probability);
@@ -688,7 +688,7 @@ fn cells_inside(
 }
 
 /// `per_cell` particles uniformly at random in every `true` cell, cells in row-major order.
-fn jittered_particles(cells: &[bool], ny: usize, per_cell: usize, rng: &mut StdRng) -> Vec<f32> {
+fn jittered_particles(cells: &[bool], ny: usize, per_cell: usize, rng: &mut ChaCha8Rng) -> Vec<f32> {
     let mut positions = Vec::new();
     for (k, _) in cells.iter().enumerate().filter(|(_, c)| **c) {
         let (i, j) = ((k / ny) as f32, (k % ny) as f32);
@@ -701,12 +701,12 @@ fn jittered_particles(cells: &[bool], ny: usize, per_cell: usize, rng: &mut StdR
 }
 
 /// A whole number uniformly in `[lo, hi]`.
-fn draw_count(rng: &mut StdRng, [lo, hi]: [usize; 2]) -> usize {
+fn draw_count(rng: &mut ChaCha8Rng, [lo, hi]: [usize; 2]) -> usize {
     rng.random_range(lo..=hi)
 }
 
 /// A real number uniformly in `[lo, hi]`.
-fn draw_real(rng: &mut StdRng, [lo, hi]: [f32; 2]) -> f32 {
+fn draw_real(rng: &mut ChaCha8Rng, [lo, hi]: [f32; 2]) -> f32 {
     if lo == hi {
         lo
     } else {

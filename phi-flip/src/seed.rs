@@ -3,8 +3,8 @@
 use phi_core::backend::Host;
 use phi_core::fields::Domain;
 use phi_geom::Geometry;
-use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 
 use crate::error::Result;
 
@@ -43,7 +43,7 @@ pub fn seed_particles(
     let d = domain.dim();
     let resolution = domain.resolution();
     let dx = domain.cell_size();
-    let mut rng = StdRng::seed_from_u64(seed);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut positions = Vec::new();
     let mut index = vec![0usize; d];
     for cell in 0..domain.cell_count() {

@@ -376,7 +376,9 @@ pub trait Backend: Copy + Clone + Debug + Default + Send + Sync + 'static {
     /// Uniform random values in `[low, high)` from a generator seeded by `seed`.
     ///
     /// The values are drawn on the host, so one seed gives the same tensor on every backend and
-    /// device, whatever the number of threads.
+    /// device, whatever the number of threads. The generator is ChaCha8, whose stream is fixed by
+    /// reference vectors (unlike `rand`'s `StdRng`, which may change in any release), so a seed
+    /// also gives the same tensor in later versions.
     fn float_random_uniform(
         shape: &[usize],
         low: f32,
@@ -384,7 +386,7 @@ pub trait Backend: Copy + Clone + Debug + Default + Send + Sync + 'static {
         seed: u64,
         device: &Self::Device,
     ) -> Self::Float {
-        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let dist = rand_distr::Uniform::new(low, high).unwrap_or_else(|_| {
             // An empty or inverted interval degenerates to the constant `low`.
             rand_distr::Uniform::new_inclusive(low, low).expect("a point interval is valid")
@@ -404,7 +406,7 @@ pub trait Backend: Copy + Clone + Debug + Default + Send + Sync + 'static {
         seed: u64,
         device: &Self::Device,
     ) -> Self::Float {
-        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let dist = rand_distr::Normal::new(mean, std.abs()).expect("std is finite");
         let n = shape.iter().product();
         let data = (0..n).map(|_| dist.sample(&mut rng)).collect();
