@@ -12,7 +12,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::model::{ModelError, Parameters};
 
-/// DeepMind's learning rate: `(initial − final) · 0.1^(step / decay_steps) + final`.
+/// DeepMind's learning rate: `(initial − final) · 0.1^(step / decay_steps) + final`, times
+/// `min(1, (step + 1) / warmup_steps)` during an optional linear warm-up.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LearningRate {
@@ -22,6 +23,14 @@ pub struct LearningRate {
     pub final_rate: f64,
     /// Steps over which `initial − final` shrinks tenfold (5e6).
     pub decay_steps: f64,
+    /// Steps of a linear warm-up from `rate / warmup_steps` to the schedule's rate (0: none,
+    /// DeepMind's choice).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub warmup_steps: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 impl Default for LearningRate {
@@ -30,6 +39,7 @@ impl Default for LearningRate {
             initial: 1e-4,
             final_rate: 1e-6,
             decay_steps: 5e6,
+            warmup_steps: 0.0,
         }
     }
 }
@@ -41,13 +51,19 @@ impl LearningRate {
             initial: rate,
             final_rate: rate,
             decay_steps: 1.0,
+            warmup_steps: 0.0,
         }
     }
 
     /// The rate at `step` (counted from 0).
     pub fn at(&self, step: u64) -> f64 {
-        (self.initial - self.final_rate) * 0.1f64.powf(step as f64 / self.decay_steps)
-            + self.final_rate
+        let rate = (self.initial - self.final_rate) * 0.1f64.powf(step as f64 / self.decay_steps)
+            + self.final_rate;
+        if self.warmup_steps > 0.0 {
+            rate * ((step + 1) as f64 / self.warmup_steps).min(1.0)
+        } else {
+            rate
+        }
     }
 }
 
@@ -63,6 +79,10 @@ pub struct AdamConfig {
     pub eps: f64,
     /// The learning rate per step.
     pub learning_rate: LearningRate,
+    /// Gradients whose global L2 norm (over every parameter) exceeds this are scaled down to it
+    /// before the update (absent: no clipping, DeepMind's choice).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clip_norm: Option<f64>,
 }
 
 impl Default for AdamConfig {
@@ -72,6 +92,7 @@ impl Default for AdamConfig {
             beta2: 0.999,
             eps: 1e-8,
             learning_rate: LearningRate::default(),
+            clip_norm: None,
         }
     }
 }
@@ -143,7 +164,8 @@ impl<B: Backend> Adam<B> {
     }
 
     /// One update: the new values of `params` (detached) from their `gradients` (one per
-    /// parameter, by name, as [`Parameters::iter`] orders them).
+    /// parameter, by name, as [`Parameters::iter`] orders them), scaled down to
+    /// [`AdamConfig::clip_norm`] first when their global norm exceeds it.
     ///
     /// # Errors
     /// [`ModelError::Input`] when a gradient is missing or of another shape,
@@ -164,6 +186,7 @@ impl<B: Backend> Adam<B> {
                 ),
             });
         }
+        let mut squared_norm = 0.0f64;
         for ((name, p), g) in params.iter().zip(gradients) {
             if g.shape() != p.shape() {
                 return Err(ModelError::Input {
@@ -175,14 +198,17 @@ impl<B: Backend> Adam<B> {
                     ),
                 });
             }
-            if !g.host_values().iter().all(|x| x.is_finite()) {
+            let values = g.host_values();
+            if !values.iter().all(|x| x.is_finite()) {
                 return Err(ModelError::NonFinite {
                     what: "gradients",
                     reason: format!("'{name}': a non-finite gradient"),
                 });
             }
+            squared_norm += values.iter().map(|&x| f64::from(x) * f64::from(x)).sum::<f64>();
         }
         let c = self.config;
+        let scale = clip_scale(c.clip_norm, squared_norm.sqrt());
         let t = self.step + 1;
         let lr = c.learning_rate.at(self.step);
         let first_correction = 1.0 - c.beta1.powf(t as f64);
@@ -192,6 +218,7 @@ impl<B: Backend> Adam<B> {
         let mut second = Vec::with_capacity(params.len());
         let updated = params.map(|name, p| {
             let g = gradients[index].detach();
+            let g = if scale < 1.0 { &g * scale as f32 } else { g };
             index += 1;
             let m = &self
                 .first
@@ -222,5 +249,38 @@ impl<B: Backend> Adam<B> {
             .map(|_, _| second.next().expect("one per parameter").1);
         self.step = t;
         Ok(updated)
+    }
+}
+
+/// The factor that brings gradients of global norm `norm` down to `clip` (1 when they are within
+/// it or there is no clipping).
+fn clip_scale(clip: Option<f64>, norm: f64) -> f64 {
+    match clip {
+        Some(clip) if norm > clip => clip / norm,
+        _ => 1.0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn warm_up_ramps_linearly_to_the_schedule() {
+        let mut rate = LearningRate::constant(1e-3);
+        rate.warmup_steps = 4.0;
+        let rates: Vec<f64> = (0..6).map(|s| rate.at(s)).collect();
+        for (got, want) in rates.iter().zip([2.5e-4, 5e-4, 7.5e-4, 1e-3, 1e-3, 1e-3]) {
+            approx::assert_relative_eq!(*got, want, max_relative = 1e-12);
+        }
+        rate.warmup_steps = 0.0;
+        assert_eq!(rate.at(0), 1e-3);
+    }
+
+    #[test]
+    fn clipping_scales_only_norms_above_the_limit() {
+        assert_eq!(clip_scale(None, 10.0), 1.0);
+        assert_eq!(clip_scale(Some(2.0), 1.5), 1.0);
+        approx::assert_relative_eq!(clip_scale(Some(2.0), 8.0), 0.25);
     }
 }

@@ -18,7 +18,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::{AdamConfig, Pushforward, TrainError};
+use super::{AdamConfig, ErrorNorm, Pushforward, TrainError};
 use crate::data::{Metadata, Variant};
 use crate::model::{GnsConfig, ModelSpec};
 
@@ -89,6 +89,42 @@ pub struct TrainingSection {
     pub pushforward: Option<Pushforward>,
     /// A row of `train.csv` (the mean loss since the last row) every this many steps.
     pub log_every: u64,
+    /// How a particle's error in normalised acceleration is scored: `"mse"` (the thesis's
+    /// squared error, the default) or `"huber"` (squared within `huber_delta`, linear beyond).
+    #[serde(default, skip_serializing_if = "LossKind::is_mse")]
+    pub loss: LossKind,
+    /// `δ` of the Huber loss in normalised units (only with `loss = "huber"`; default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub huber_delta: Option<f64>,
+}
+
+/// `training.loss`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LossKind {
+    /// The squared error (thesis equation 5.1).
+    #[default]
+    Mse,
+    /// Huber's loss (times two), quadratic within `huber_delta`.
+    Huber,
+}
+
+impl LossKind {
+    fn is_mse(&self) -> bool {
+        *self == LossKind::Mse
+    }
+}
+
+impl TrainingSection {
+    /// The error norm of the loss this section chooses.
+    pub fn error_norm(&self) -> ErrorNorm {
+        match self.loss {
+            LossKind::Mse => ErrorNorm::Squared,
+            LossKind::Huber => ErrorNorm::Huber {
+                delta: self.huber_delta.unwrap_or(1.0) as f32,
+            },
+        }
+    }
 }
 
 /// `[checkpoints]`.
@@ -206,6 +242,17 @@ impl TrainConfig {
         if t.log_every == 0 {
             return fail("training.log_every", "must be ≥ 1".into());
         }
+        if let Some(delta) = t.huber_delta {
+            if t.loss != LossKind::Huber {
+                return fail(
+                    "training.huber_delta",
+                    "is only used with training.loss = \"huber\"".into(),
+                );
+            }
+            if !(delta.is_finite() && delta > 0.0) {
+                return fail("training.huber_delta", format!("{delta} is not > 0"));
+            }
+        }
         if let Some(p) = &t.pushforward {
             p.validate(Path::new(origin), "training.pushforward")
                 .map_err(|e| match e {
@@ -243,6 +290,17 @@ impl TrainConfig {
             if !(value.is_finite() && value > 0.0) {
                 return fail(key, format!("{value} is not > 0"));
             }
+        }
+        if !(lr.warmup_steps.is_finite() && lr.warmup_steps >= 0.0) {
+            return fail(
+                "optimizer.learning_rate.warmup_steps",
+                format!("{} is not ≥ 0", lr.warmup_steps),
+            );
+        }
+        if let Some(clip) = o.clip_norm
+            && !(clip.is_finite() && clip > 0.0)
+        {
+            return fail("optimizer.clip_norm", format!("{clip} is not > 0"));
         }
         if self.checkpoints.every == 0 {
             return fail("checkpoints.every", "must be ≥ 1".into());
@@ -357,5 +415,72 @@ impl TrainConfig {
             .pushforward
             .as_ref()
             .map_or(0, Pushforward::max_unroll)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The CPU 1s preset of the repository.
+    fn preset() -> String {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/gns/cpu/1s.toml");
+        std::fs::read_to_string(path).expect("the CPU 1s preset")
+    }
+
+    fn refusal(text: &str) -> String {
+        TrainConfig::from_toml(text, "preset.toml")
+            .expect_err("refused")
+            .to_string()
+    }
+
+    #[test]
+    fn the_loss_defaults_to_the_squared_error_and_huber_takes_a_delta() {
+        let text = preset();
+        let plain = TrainConfig::from_toml(&text, "preset.toml").unwrap();
+        assert_eq!(plain.training.error_norm(), ErrorNorm::Squared);
+        assert!(!plain.to_toml().contains("loss ="), "the default is left unsaid");
+        let huber = text.replace("log_every = 100", "log_every = 100\nloss = \"huber\"");
+        let c = TrainConfig::from_toml(&huber, "preset.toml").unwrap();
+        assert_eq!(c.training.error_norm(), ErrorNorm::Huber { delta: 1.0 });
+        let delta = huber.replace("loss = \"huber\"", "loss = \"huber\"\nhuber_delta = 2.5");
+        let c = TrainConfig::from_toml(&delta, "preset.toml").unwrap();
+        assert_eq!(c.training.error_norm(), ErrorNorm::Huber { delta: 2.5 });
+        assert_eq!(TrainConfig::from_toml(&c.to_toml(), "stored").unwrap(), c);
+        let e = refusal(&text.replace("log_every = 100", "log_every = 100\nhuber_delta = 2.0"));
+        assert!(e.contains("training.huber_delta") && e.contains("huber"), "{e}");
+        let e = refusal(&delta.replace("huber_delta = 2.5", "huber_delta = -1.0"));
+        assert!(e.contains("training.huber_delta") && e.contains("-1"), "{e}");
+        let e = refusal(&text.replace("log_every = 100", "log_every = 100\nloss = \"l1\""));
+        assert!(e.contains("l1"), "{e}");
+    }
+
+    #[test]
+    fn warm_up_and_clipping_are_checked_and_stored() {
+        let text = preset()
+            .replace("eps = 1e-8", "eps = 1e-8\nclip_norm = 0.5")
+            .replace("decay_steps = 1e4", "decay_steps = 1e4\nwarmup_steps = 100");
+        let c = TrainConfig::from_toml(&text, "preset.toml").unwrap();
+        assert_eq!(c.optimizer.clip_norm, Some(0.5));
+        assert_eq!(c.optimizer.learning_rate.warmup_steps, 100.0);
+        assert_eq!(TrainConfig::from_toml(&c.to_toml(), "stored").unwrap(), c);
+        let e = refusal(&text.replace("clip_norm = 0.5", "clip_norm = 0.0"));
+        assert!(e.contains("optimizer.clip_norm"), "{e}");
+        let e = refusal(&text.replace("warmup_steps = 100", "warmup_steps = -3"));
+        assert!(e.contains("optimizer.learning_rate.warmup_steps"), "{e}");
+    }
+
+    #[test]
+    fn every_lever_preset_parses() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/gns/levers");
+        let mut count = 0;
+        for entry in std::fs::read_dir(dir).expect("configs/gns/levers") {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                TrainConfig::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
+                count += 1;
+            }
+        }
+        assert!(count >= 2, "{count} presets");
     }
 }

@@ -5,6 +5,22 @@ use phi_core::tensor::Tensor;
 
 use crate::model::{Gns, GnsKernels, GraphBatch, ModelError};
 
+/// How a particle's error in normalised acceleration is scored: the per-component error `r`
+/// goes through this and is summed over components.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum ErrorNorm {
+    /// `r²`: the mean squared error of thesis equation 5.1 and DeepMind's loss.
+    #[default]
+    Squared,
+    /// `r²` for `|r| ≤ δ`, `2δ|r| − δ²` beyond: twice Huber's loss, so that it equals the squared
+    /// error where that is small and grows linearly on outliers (wall impacts), whose gradient
+    /// then no longer outweighs the rest of the batch.
+    Huber {
+        /// `δ`, in normalised units.
+        delta: f32,
+    },
+}
+
 /// `1.0` for particles that count in the loss, `0.0` for kinematic ones: `[N]`.
 ///
 /// # Errors
@@ -27,8 +43,8 @@ pub fn non_kinematic_mask<B: phi_core::Backend>(
     Ok(Tensor::from_vec(mask, &[particle_type.len()], device)?)
 }
 
-/// The squared error between the predicted and the target normalised acceleration, summed over
-/// dimensions and averaged over the particles of `mask` (`[N]`, 1 where a particle counts): a
+/// The error (squared, or as `norm` says) between the predicted and the target normalised
+/// acceleration, summed over dimensions and averaged over the particles of `mask` (`[N]`, 1 where a particle counts): a
 /// one-element tensor, differentiable in the model's parameters and the batch's positions. The
 /// target is the acceleration that takes the window of `batch` to `next` (`[N, dim]`, with a
 /// noisy window: the adjusted next positions of
@@ -41,13 +57,14 @@ pub fn one_step_loss<B: GnsKernels>(
     batch: &GraphBatch<B>,
     next: &Tensor<B>,
     mask: &Tensor<B>,
+    norm: ErrorNorm,
 ) -> Result<Tensor<B>, ModelError> {
     let target = model.target_acceleration(batch, next)?;
-    acceleration_loss(model, batch, &target, mask)
+    acceleration_loss(model, batch, &target, mask, norm)
 }
 
 /// The loss of [`one_step_loss`] against a given normalised target acceleration `target`
-/// (`[N, dim]`, in the units of [`Gns::normalised_acceleration`]): the squared error summed
+/// (`[N, dim]`, in the units of [`Gns::normalised_acceleration`]): the error of `norm` summed
 /// over dimensions and averaged over the particles of `mask`.
 ///
 /// # Errors
@@ -57,10 +74,11 @@ pub fn acceleration_loss<B: GnsKernels>(
     batch: &GraphBatch<B>,
     target: &Tensor<B>,
     mask: &Tensor<B>,
+    norm: ErrorNorm,
 ) -> Result<Tensor<B>, ModelError> {
     let counted = counted_particles(batch, mask)?;
     let predicted = model.normalised_acceleration(batch)?;
-    squared_error(&predicted, target, mask, counted)
+    masked_error(&predicted, target, mask, counted, norm)
 }
 
 /// The number of particles that count in the loss: the sum of `mask`, checked to be `[N]` and
@@ -93,9 +111,27 @@ pub(crate) fn squared_error<B: phi_core::Backend>(
     mask: &Tensor<B>,
     counted: f32,
 ) -> Result<Tensor<B>, ModelError> {
-    let per_particle = predicted
-        .binary(BinaryOp::Sub, target)?
-        .square()
-        .sum_axis(1)?;
+    masked_error(predicted, target, mask, counted, ErrorNorm::Squared)
+}
+
+/// `Σ_i mask_i Σ_a e(predicted_ia − target_ia) / counted`, `e` the error of `norm`.
+pub(crate) fn masked_error<B: phi_core::Backend>(
+    predicted: &Tensor<B>,
+    target: &Tensor<B>,
+    mask: &Tensor<B>,
+    counted: f32,
+    norm: ErrorNorm,
+) -> Result<Tensor<B>, ModelError> {
+    let residual = predicted.binary(BinaryOp::Sub, target)?;
+    let per_component = match norm {
+        ErrorNorm::Squared => residual.square(),
+        ErrorNorm::Huber { delta } => {
+            // q = min(|r|, δ): q² + 2δ(|r| − q) is r² inside δ and 2δ|r| − δ² outside.
+            let size = residual.abs();
+            let inner = size.clamp(0.0, delta);
+            inner.square() + size.binary(BinaryOp::Sub, &inner)? * (2.0 * delta)
+        }
+    };
+    let per_particle = per_component.sum_axis(1)?;
     Ok(per_particle.binary(BinaryOp::Mul, mask)?.sum() / counted)
 }

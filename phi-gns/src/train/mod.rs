@@ -31,7 +31,7 @@ pub mod stream;
 pub use adam::{Adam, AdamConfig, LearningRate};
 pub use config::TrainConfig;
 pub use error::TrainError;
-pub use loss::{acceleration_loss, non_kinematic_mask, one_step_loss};
+pub use loss::{ErrorNorm, acceleration_loss, non_kinematic_mask, one_step_loss};
 pub use multistep::multi_step_loss;
 pub use noise::{RandomWalkNoise, random_walk_noise};
 pub use pushforward::{Pushforward, push_forward, pushforward_loss};
@@ -58,7 +58,7 @@ pub fn train_step<B: AutodiffBackend + GnsKernels>(
     mask: &Tensor<B>,
 ) -> Result<(Gns<B>, f32), ModelError> {
     train_step_with(model, adam, |tracked| {
-        one_step_loss(tracked, batch, next, mask)
+        one_step_loss(tracked, batch, next, mask, ErrorNorm::Squared)
     })
 }
 

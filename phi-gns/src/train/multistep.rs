@@ -20,7 +20,7 @@
 
 use phi_core::tensor::Tensor;
 
-use super::loss::{counted_particles, squared_error};
+use super::loss::{ErrorNorm, counted_particles, masked_error};
 use crate::model::{Gns, GnsKernels, GraphBatch, ModelError};
 
 /// The multi-step loss of `model` (see the [module docs](self)): the mean over steps
@@ -32,7 +32,8 @@ use crate::model::{Gns, GnsKernels, GraphBatch, ModelError};
 /// - `truth`: the true positions of frames `t ..= t + n + 1`, `[N, n + 2, dim]`, `t` the latest
 ///   input frame;
 /// - `mask`: `[N]`, 1 where a particle counts in the loss, 0 for kinematic particles, which
-///   follow `truth` in the later windows.
+///   follow `truth` in the later windows;
+/// - `norm`: how each step's error is scored.
 ///
 /// With `n = 0` the result is [`one_step_loss`](super::one_step_loss)'s, bit for bit.
 ///
@@ -45,15 +46,17 @@ pub fn multi_step_loss<B: GnsKernels>(
     next: &Tensor<B>,
     truth: &Tensor<B>,
     mask: &Tensor<B>,
+    norm: ErrorNorm,
 ) -> Result<Tensor<B>, ModelError> {
     let steps = extra_steps(batch, truth, "multi-step truth")?;
     let counted = counted_particles(batch, mask)?;
     let predicted = model.normalised_acceleration(batch)?;
-    let mut total = squared_error(
+    let mut total = masked_error(
         &predicted,
         &model.target_acceleration(batch, next)?,
         mask,
         counted,
+        norm,
     )?;
     let follows_model = free_particles(mask)?;
     let mut window = batch.clone();
@@ -64,7 +67,7 @@ pub fn multi_step_loss<B: GnsKernels>(
         window = window.advance(&next, model.spec())?;
         predicted = model.normalised_acceleration(&window)?;
         let target = true_acceleration(model, truth, i)?;
-        total = total + squared_error(&predicted, &target, mask, counted)?;
+        total = total + masked_error(&predicted, &target, mask, counted, norm)?;
     }
     Ok(total / (steps + 1) as f32)
 }

@@ -43,7 +43,7 @@ use phi_core::tensor::Tensor;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
-use super::loss::{acceleration_loss, counted_particles};
+use super::loss::{ErrorNorm, acceleration_loss, counted_particles};
 use super::multistep::{extra_steps, free_particles, true_acceleration, truth_frame};
 use super::one_step_loss;
 use crate::model::{Gns, GnsKernels, GraphBatch, ModelError};
@@ -273,7 +273,8 @@ pub fn push_forward<B: GnsKernels>(
 ///   [`one_step_loss`] takes them (noise-adjusted for a noisy window); used only for `k = 0`;
 /// - `truth`: the true frames `t − k ..= t + 1`, `[N, k + 2, dim]`;
 /// - `mask`: `[N]`, 1 where a particle counts in the loss, 0 for the kinematic ones, which
-///   follow `truth` in the unroll.
+///   follow `truth` in the unroll;
+/// - `norm`: how the error is scored.
 ///
 /// The gradient is that of the one-step loss on the pushed-forward window held fixed.
 ///
@@ -285,13 +286,14 @@ pub fn pushforward_loss<B: GnsKernels>(
     next: &Tensor<B>,
     truth: &Tensor<B>,
     mask: &Tensor<B>,
+    norm: ErrorNorm,
 ) -> Result<Tensor<B>, ModelError> {
     let unrolls = extra_steps(batch, truth, "pushforward truth")?;
     if unrolls == 0 {
-        return one_step_loss(model, batch, next, mask);
+        return one_step_loss(model, batch, next, mask, norm);
     }
     counted_particles(batch, mask)?;
     let pushed = push_forward(model, batch, &truth.narrow(1, 1..unrolls + 1)?, mask)?;
     let target = true_acceleration(model, truth, unrolls)?;
-    acceleration_loss(model, &pushed, &target.detach(), mask)
+    acceleration_loss(model, &pushed, &target.detach(), mask, norm)
 }

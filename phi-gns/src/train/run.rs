@@ -37,6 +37,7 @@ use super::sampler::WindowSpec;
 use super::screening::{Screening, screen};
 use super::stream::{BatchConfig, BatchSource, BatchStream, HostBatch};
 use super::{
+    ErrorNorm,
     Adam, TrainError, multi_step_loss, non_kinematic_mask, pushforward_loss, random_walk_noise,
     train_step_with,
 };
@@ -372,6 +373,7 @@ struct LossInputs<B: GnsKernels> {
     truth: Option<Tensor<B>>,
     mask: Tensor<B>,
     pushforward: bool,
+    norm: ErrorNorm,
 }
 
 impl<B: GnsKernels> LossInputs<B> {
@@ -461,17 +463,20 @@ impl<B: GnsKernels> LossInputs<B> {
             truth,
             mask,
             pushforward: unrolls > 0,
+            norm: config.training.error_norm(),
         })
     }
 
     fn loss(&self, model: &Gns<B>) -> Result<Tensor<B>, ModelError> {
         match (&self.truth, self.pushforward) {
-            (None, _) => super::one_step_loss(model, &self.batch, &self.next, &self.mask),
+            (None, _) => {
+                super::one_step_loss(model, &self.batch, &self.next, &self.mask, self.norm)
+            }
             (Some(truth), true) => {
-                pushforward_loss(model, &self.batch, &self.next, truth, &self.mask)
+                pushforward_loss(model, &self.batch, &self.next, truth, &self.mask, self.norm)
             }
             (Some(truth), false) => {
-                multi_step_loss(model, &self.batch, &self.next, truth, &self.mask)
+                multi_step_loss(model, &self.batch, &self.next, truth, &self.mask, self.norm)
             }
         }
     }

@@ -15,7 +15,7 @@ use phi_core::{AutodiffBackend, Tensor};
 use phi_gns::data::{LIQUID, OBSTACLE};
 use phi_gns::graph::RadiusGraph;
 use phi_gns::model::{Gns, GnsKernels, GraphBatch, ModelError, Normalisation};
-use phi_gns::train::{
+use phi_gns::train::{ErrorNorm, 
     Pushforward, acceleration_loss, multi_step_loss, non_kinematic_mask, one_step_loss,
     push_forward, pushforward_loss, random_walk_noise,
 };
@@ -231,13 +231,14 @@ fn without_extra_steps_both_losses_are_the_one_step_loss<B: GnsKernels>() {
     let n = p.particles();
     let truth = p.truth(0..2);
     let scalar = |loss: Result<Tensor<B>, ModelError>| loss.unwrap().to_scalar().unwrap();
-    let one = scalar(one_step_loss(&p.model, &p.batch, &p.next(), &p.mask));
+    let one = scalar(one_step_loss(&p.model, &p.batch, &p.next(), &p.mask, ErrorNorm::Squared));
     let multi = scalar(multi_step_loss(
         &p.model,
         &p.batch,
         &p.next(),
         &truth,
         &p.mask,
+        ErrorNorm::Squared,
     ));
     let pushed = scalar(pushforward_loss(
         &p.model,
@@ -245,6 +246,7 @@ fn without_extra_steps_both_losses_are_the_one_step_loss<B: GnsKernels>() {
         &p.next(),
         &truth,
         &p.mask,
+        ErrorNorm::Squared,
     ));
     assert!(one > 0.0, "{}: a zero loss proves nothing", B::name());
     assert_eq!(bits(&[multi, pushed]), bits(&[one, one]), "{}", B::name());
@@ -254,30 +256,31 @@ fn without_extra_steps_both_losses_are_the_one_step_loss<B: GnsKernels>() {
     let noisy = p.batch_of(&noise.apply(&p.scene.window));
     let adjusted =
         Tensor::<B>::from_vec(noise.adjust_target(&p.frame(1)), &[n, 2], &device).unwrap();
-    let one_noisy = scalar(one_step_loss(&p.model, &noisy, &adjusted, &p.mask));
+    let one_noisy = scalar(one_step_loss(&p.model, &noisy, &adjusted, &p.mask, ErrorNorm::Squared));
     let multi_noisy = scalar(multi_step_loss(
         &p.model, &noisy, &adjusted, &truth, &p.mask,
+        ErrorNorm::Squared,
     ));
     assert_ne!(one_noisy, one, "the noise changes the loss");
     assert_eq!(multi_noisy.to_bits(), one_noisy.to_bits(), "{}", B::name());
 
     // Inputs that do not fit are refused with the input named.
     let short = p.truth(0..1);
-    let error = multi_step_loss(&p.model, &p.batch, &p.next(), &short, &p.mask)
+    let error = multi_step_loss(&p.model, &p.batch, &p.next(), &short, &p.mask, ErrorNorm::Squared)
         .unwrap_err()
         .to_string();
     assert!(error.contains("multi-step truth"), "{error}");
-    let error = pushforward_loss(&p.model, &p.batch, &p.next(), &short, &p.mask)
+    let error = pushforward_loss(&p.model, &p.batch, &p.next(), &short, &p.mask, ErrorNorm::Squared)
         .unwrap_err()
         .to_string();
     assert!(error.contains("pushforward truth"), "{error}");
     let none = Tensor::<B>::zeros(&[n], &device);
-    let error = multi_step_loss(&p.model, &p.batch, &p.next(), &p.truth(0..3), &none)
+    let error = multi_step_loss(&p.model, &p.batch, &p.next(), &p.truth(0..3), &none, ErrorNorm::Squared)
         .unwrap_err()
         .to_string();
     assert!(error.contains("no particle"), "{error}");
     let wide = Tensor::<B>::ones(&[n, 1], &device);
-    let error = multi_step_loss(&p.model, &p.batch, &p.next(), &p.truth(0..3), &wide)
+    let error = multi_step_loss(&p.model, &p.batch, &p.next(), &p.truth(0..3), &wide, ErrorNorm::Squared)
         .unwrap_err()
         .to_string();
     assert!(error.contains("loss mask"), "{error}");
@@ -303,6 +306,7 @@ fn the_multi_step_loss_is_the_mean_over_hand_assembled_windows<B: GnsKernels>() 
                 &p.next(),
                 &p.truth(0..steps + 2),
                 &p.mask,
+                ErrorNorm::Squared,
             )
             .unwrap()
             .to_scalar()
@@ -365,9 +369,9 @@ fn push_forward_is_next_positions_repeated_with_kinematic_particles_reset<B: Gns
         // The loss takes the one-step loss on that window against the true acceleration.
         if k >= 1 {
             let truth = p.truth(0..k + 2);
-            let got = pushforward_loss(&p.model, &p.batch, &p.next(), &truth, &p.mask).unwrap();
+            let got = pushforward_loss(&p.model, &p.batch, &p.next(), &truth, &p.mask, ErrorNorm::Squared).unwrap();
             let expected =
-                acceleration_loss(&p.model, &expected, &p.true_acceleration(k), &p.mask).unwrap();
+                acceleration_loss(&p.model, &expected, &p.true_acceleration(k), &p.mask, ErrorNorm::Squared).unwrap();
             assert_eq!(
                 got.to_scalar().unwrap().to_bits(),
                 expected.to_scalar().unwrap().to_bits(),
@@ -506,7 +510,7 @@ fn multi_step_gradients_match_finite_differences<B: AutodiffBackend + GnsKernels
     for steps in [1, 2] {
         let truth = p.truth(0..steps + 2);
         let (g, loss) = gradients(&p.model, |model| {
-            multi_step_loss(model, &p.batch, &p.next(), &truth, &p.mask).unwrap()
+            multi_step_loss(model, &p.batch, &p.next(), &truth, &p.mask, ErrorNorm::Squared).unwrap()
         });
         let (host_loss, graphs) = p.host_multi_step_loss(&host, steps);
         assert!(
@@ -520,11 +524,11 @@ fn multi_step_gradients_match_finite_differences<B: AutodiffBackend + GnsKernels
         }
         // The gradient with the later windows held fixed (detached).
         let (held, _) = gradients(&p.model, |model| {
-            let mut total = one_step_loss(model, &p.batch, &p.next(), &p.mask).unwrap();
+            let mut total = one_step_loss(model, &p.batch, &p.next(), &p.mask, ErrorNorm::Squared).unwrap();
             for i in 1..=steps {
                 let window = push_forward(model, &p.batch, &p.truth(1..i + 1), &p.mask).unwrap();
                 total = total
-                    + acceleration_loss(model, &window, &p.true_acceleration(i), &p.mask).unwrap();
+                    + acceleration_loss(model, &window, &p.true_acceleration(i), &p.mask, ErrorNorm::Squared).unwrap();
             }
             total / (steps + 1) as f32
         });
@@ -599,13 +603,13 @@ fn pushforward_gradients_are_those_of_the_pushed_forward_window_held_fixed<
     let k = 2;
     let truth = p.truth(0..k + 2);
     let (got, loss) = gradients(&p.model, |model| {
-        pushforward_loss(model, &p.batch, &p.next(), &truth, &p.mask).unwrap()
+        pushforward_loss(model, &p.batch, &p.next(), &truth, &p.mask, ErrorNorm::Squared).unwrap()
     });
     // The window of k unrolls, rebuilt from host values: nothing ties it to the parameters.
     let pushed = push_forward(&p.model, &p.batch, &p.truth(1..k + 1), &p.mask).unwrap();
     let fixed = p.batch_of(&pushed.positions().to_vec());
     let (expected, expected_loss) = gradients(&p.model, |model| {
-        acceleration_loss(model, &fixed, &p.true_acceleration(k), &p.mask).unwrap()
+        acceleration_loss(model, &fixed, &p.true_acceleration(k), &p.mask, ErrorNorm::Squared).unwrap()
     });
     assert_eq!(loss, expected_loss, "{}", B::name());
     for (name, (a, b)) in p
@@ -629,7 +633,7 @@ fn pushforward_gradients_are_those_of_the_pushed_forward_window_held_fixed<
             let next = Tensor::select(&free, &next, &truth).unwrap();
             window = window.advance(&next, model.spec()).unwrap();
         }
-        acceleration_loss(model, &window, &p.true_acceleration(k), &p.mask).unwrap()
+        acceleration_loss(model, &window, &p.true_acceleration(k), &p.mask, ErrorNorm::Squared).unwrap()
     });
     let difference: f64 = tracked
         .iter()

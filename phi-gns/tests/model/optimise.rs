@@ -5,7 +5,7 @@
 use phi_core::{AutodiffBackend, Backend, Tensor};
 use phi_gns::data::OBSTACLE;
 use phi_gns::model::{Gns, GnsKernels, GraphBatch};
-use phi_gns::train::{
+use phi_gns::train::{ErrorNorm, 
     Adam, AdamConfig, LearningRate, multi_step_loss, non_kinematic_mask, random_walk_noise,
     train_step, train_step_with,
 };
@@ -38,6 +38,7 @@ fn adam_matches_the_host_update<B: GnsKernels>() {
             initial: 1e-2,
             final_rate: 1e-3,
             decay_steps: 2.0,
+            warmup_steps: 0.0,
         },
         ..AdamConfig::default()
     };
@@ -166,7 +167,7 @@ fn step<B: AutodiffBackend + GnsKernels>(
     match loss {
         Loss::OneStep => train_step(model, adam, &w.batch, &w.next, &w.mask).unwrap(),
         Loss::TwoStep => train_step_with(model, adam, |m| {
-            multi_step_loss(m, &w.batch, &w.next, &w.truth, &w.mask)
+            multi_step_loss(m, &w.batch, &w.next, &w.truth, &w.mask, ErrorNorm::Squared)
         })
         .unwrap(),
     }

@@ -5,13 +5,16 @@
 use phi_core::{AutodiffBackend, Tensor};
 use phi_gns::data::OBSTACLE;
 use phi_gns::model::{Gns, GnsKernels, GraphBatch};
-use phi_gns::train::{non_kinematic_mask, one_step_loss, random_walk_noise};
+use phi_gns::train::{ErrorNorm, non_kinematic_mask, one_step_loss, random_walk_noise};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 
 use super::common::{Rng, config, liquid_over_obstacles, perturbed, spec};
 
-phi_core::backend_tests!(loss_is_the_masked_mean_of_squared_errors);
+phi_core::backend_tests!(
+    loss_is_the_masked_mean_of_squared_errors,
+    huber_loss_is_quadratic_inside_delta_and_linear_outside
+);
 mod gradient {
     use super::loss_gradient_in_the_decoder_bias_is_the_mean_error;
     phi_core::autodiff_backend_tests!(loss_gradient_in_the_decoder_bias_is_the_mean_error);
@@ -145,7 +148,7 @@ fn loss_is_the_masked_mean_of_squared_errors<B: GnsKernels>() {
     let n = p.types.len();
     let next = Tensor::<B>::from_vec(p.next.clone(), &[n, 2], &device).unwrap();
     let mask = non_kinematic_mask::<B>(&p.types, &[OBSTACLE], &device).unwrap();
-    let loss = one_step_loss(&p.model, &p.batch, &next, &mask).unwrap();
+    let loss = one_step_loss(&p.model, &p.batch, &next, &mask, ErrorNorm::Squared).unwrap();
     let predicted = p.model.normalised_acceleration(&p.batch).unwrap().to_vec();
     let target = p
         .model
@@ -173,13 +176,13 @@ fn loss_is_the_masked_mean_of_squared_errors<B: GnsKernels>() {
         moved[i * 2] += 0.5;
     }
     let moved = Tensor::<B>::from_vec(moved, &[n, 2], &device).unwrap();
-    let same = one_step_loss(&p.model, &p.batch, &moved, &mask).unwrap();
+    let same = one_step_loss(&p.model, &p.batch, &moved, &mask, ErrorNorm::Squared).unwrap();
     assert_eq!(same.to_scalar().unwrap(), loss.to_scalar().unwrap());
     // A prediction that is its own target has no loss (to the rounding of the round trip
     // through positions).
     let own = p.model.next_positions(&p.batch).unwrap();
     let zero = f64::from(
-        one_step_loss(&p.model, &p.batch, &own, &mask)
+        one_step_loss(&p.model, &p.batch, &own, &mask, ErrorNorm::Squared)
             .unwrap()
             .to_scalar()
             .unwrap(),
@@ -191,7 +194,67 @@ fn loss_is_the_masked_mean_of_squared_errors<B: GnsKernels>() {
     );
     // A batch of only kinematic particles has no loss to average.
     let none = Tensor::<B>::zeros(&[n], &device);
-    assert!(one_step_loss(&p.model, &p.batch, &next, &none).is_err());
+    assert!(one_step_loss(&p.model, &p.batch, &next, &none, ErrorNorm::Squared).is_err());
+}
+
+fn huber_loss_is_quadratic_inside_delta_and_linear_outside<B: GnsKernels>() {
+    let p = problem::<B>();
+    let device = B::default_device();
+    let n = p.types.len();
+    let next = Tensor::<B>::from_vec(p.next.clone(), &[n, 2], &device).unwrap();
+    let mask = non_kinematic_mask::<B>(&p.types, &[OBSTACLE], &device).unwrap();
+    let predicted = p.model.normalised_acceleration(&p.batch).unwrap().to_vec();
+    let target = p
+        .model
+        .target_acceleration(&p.batch, &next)
+        .unwrap()
+        .to_vec();
+    let counted: Vec<usize> = (0..n).filter(|&i| p.types[i] != OBSTACLE).collect();
+    let mut sizes: Vec<f64> = counted
+        .iter()
+        .flat_map(|&i| (0..2).map(move |k| i * 2 + k))
+        .map(|j| (f64::from(predicted[j]) - f64::from(target[j])).abs())
+        .collect();
+    sizes.sort_by(f64::total_cmp);
+    // δ at the median error: half the components on each branch.
+    let delta = sizes[sizes.len() / 2];
+    let expected = sizes
+        .iter()
+        .map(|&r| if r <= delta { r * r } else { 2.0 * delta * r - delta * delta })
+        .sum::<f64>()
+        / counted.len() as f64;
+    let huber = ErrorNorm::Huber {
+        delta: delta as f32,
+    };
+    let got = f64::from(
+        one_step_loss(&p.model, &p.batch, &next, &mask, huber)
+            .unwrap()
+            .to_scalar()
+            .unwrap(),
+    );
+    assert!(
+        (got - expected).abs() <= 1e-5 * expected,
+        "{}: Huber loss {got}, host {expected}",
+        B::name()
+    );
+    let squared = f64::from(
+        one_step_loss(&p.model, &p.batch, &next, &mask, ErrorNorm::Squared)
+            .unwrap()
+            .to_scalar()
+            .unwrap(),
+    );
+    assert!(got < squared, "{}: outliers cost less than squared", B::name());
+    // A δ above every error is the squared error.
+    let wide = ErrorNorm::Huber {
+        delta: (sizes[sizes.len() - 1] * 2.0) as f32,
+    };
+    let same = f64::from(
+        one_step_loss(&p.model, &p.batch, &next, &mask, wide)
+            .unwrap()
+            .to_scalar()
+            .unwrap(),
+    );
+    assert!((same - squared).abs() <= 1e-6 * squared, "{}", B::name());
 }
 
 fn loss_gradient_in_the_decoder_bias_is_the_mean_error<B: GnsKernels + AutodiffBackend>() {
@@ -208,7 +271,7 @@ fn loss_gradient_in_the_decoder_bias_is_the_mean_error<B: GnsKernels + AutodiffB
         .detach()
         .to_vec();
     let target = model.target_acceleration(&p.batch, &next).unwrap().to_vec();
-    let loss = one_step_loss(&model, &p.batch, &next, &mask).unwrap();
+    let loss = one_step_loss(&model, &p.batch, &next, &mask, ErrorNorm::Squared).unwrap();
     let bias = leaves.get("decoder.2.bias");
     let gradient = loss.gradients(&[bias]).unwrap()[0].to_vec();
     // The decoder's last bias adds to every particle's output, so ∂L/∂b_k is
