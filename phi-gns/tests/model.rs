@@ -15,6 +15,8 @@ mod conformance;
 mod eval;
 #[path = "model/files.rs"]
 mod files;
+#[path = "model/floors.rs"]
+mod floors;
 #[path = "model/gradients.rs"]
 mod gradients;
 #[path = "model/kernels.rs"]

@@ -29,6 +29,9 @@ pub enum ModelCommand {
     /// Write a model directory (model.json, model.safetensors) with seeded random weights for
     /// a dataset; sizes default to the thesis' GNS.
     Init(InitArgs),
+    /// One-step predictions for a block of liquid in free fall and a pool at rest, as
+    /// fractions of gravity, beside the floors: has training learnt gravity and rest?
+    Probe(super::probe::ProbeArgs),
 }
 
 /// `phi model init --data DATASET --out DIR [options]`.
@@ -255,6 +258,7 @@ pub fn check_model_dir(out: &Path) -> Result<()> {
 /// As [`init`].
 pub fn run(command: ModelCommand) -> Result<()> {
     match command {
+        ModelCommand::Probe(args) => super::probe::run(&args),
         ModelCommand::Init(args) => {
             let summary = init(&args)?;
             let c = &summary.spec.config;

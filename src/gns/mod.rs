@@ -4,6 +4,8 @@
 //!
 //! - [`init`]: `phi model init`, a model directory (`model.json`, `model.safetensors`) with
 //!   seeded random weights for a dataset;
+//! - [`probe`]: `phi model probe`, one-step predictions for free fall and rest beside the
+//!   floors;
 //! - [`rollout`]: `phi rollout`, a model run forward from ground-truth frames, with the
 //!   predictions, the truth, the per-frame position error and a GIF of both side by side;
 //! - [`train`]: `phi train`, a model trained on a dataset with a preset of `configs/gns/`;
@@ -20,6 +22,7 @@
 pub mod eval;
 pub mod init;
 pub mod inverse;
+pub mod probe;
 pub mod rollout;
 pub mod train;
 

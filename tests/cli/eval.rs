@@ -323,3 +323,98 @@ fn a_model_evaluated_on_the_walls_variant_joins_the_same_table() {
     assert!(!refused.exists());
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn the_floors_join_the_table_and_constant_velocity_rolls_out_straight_lines() {
+    let dir = scratch("eval-floors");
+    let data = dir.join("data");
+    tiny_dataset_with(&data, 2, [0.1, 0.9], Variant::Obstacles, &[("test", 1)], 20);
+    let model = dir.join("model");
+    ok(init(&data, &model, &["--seed", "1"]));
+    let out = dir.join("out");
+    let stdout = ok(eval(
+        &[model.display().to_string()],
+        &data,
+        &out,
+        &["--floors", "--short-rollout", "5", "--sinkhorn-every", "0"],
+    ));
+    assert!(
+        stdout.contains("| constant-velocity |") && stdout.contains("| mean-acceleration |"),
+        "{stdout}"
+    );
+    let record = json(&out.join("eval.json"));
+    let labels: Vec<&str> = record["models"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m["label"].as_str().unwrap())
+        .collect();
+    assert_eq!(labels, ["model", "constant-velocity", "mean-acceleration"]);
+    assert_eq!(record["models"][1]["dir"], "floor:constant-velocity");
+    // Constant velocity: frame C + k is p_C + k (p_C − p_{C−1}) for every liquid particle.
+    let dataset = phi::phi_gns::data::Dataset::open(&data).unwrap();
+    let truth = dataset.split("test").unwrap().next().unwrap().unwrap();
+    let liquid: Vec<usize> = (0..truth.particles)
+        .filter(|&i| truth.particle_type[i] == phi::phi_gns::data::LIQUID)
+        .collect();
+    let entry = json(&out.join("cache/constant-velocity/test_0.json"));
+    let curve: Vec<f64> = entry["evaluation"]["curves"]["mse"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(f64_of)
+        .collect();
+    assert_eq!(curve.len(), 20 - 1 - 5);
+    let at = |t: usize, i: usize, a: usize| f64::from(truth.frame(t)[i * 2 + a]);
+    for (k, got) in curve.iter().enumerate() {
+        let k = k + 1;
+        let mut sum = 0.0;
+        for &i in &liquid {
+            for a in 0..2 {
+                let predicted = at(5, i, a) + k as f64 * (at(5, i, a) - at(4, i, a));
+                sum += (predicted - at(5 + k, i, a)).powi(2);
+            }
+        }
+        let want = sum / (2 * liquid.len()) as f64;
+        approx::assert_relative_eq!(*got, want, max_relative = 1e-3, epsilon = 1e-12);
+    }
+}
+
+#[test]
+fn probe_reads_free_fall_and_rest_beside_the_floors() {
+    let dir = scratch("probe");
+    let data = dir.join("data");
+    tiny_dataset_with(&data, 2, [0.1, 0.9], Variant::Obstacles, &[("test", 1)], 20);
+    let model = dir.join("model");
+    ok(init(&data, &model, &["--seed", "1"]));
+    let report = dir.join("probe.json");
+    let run = |extra: &[&str]| {
+        phi()
+            .args(["model", "probe", "--data"])
+            .arg(&data)
+            .arg("--model")
+            .arg(&model)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let stdout = ok(run(&["--json", report.to_str().unwrap(), "--seeds", "2"]));
+    assert!(stdout.contains("constant-velocity"), "{stdout}");
+    let rows = json(&report);
+    let rows = rows.as_array().unwrap();
+    assert_eq!(rows.len(), 3);
+    assert_eq!(rows[0]["label"], "model");
+    let still = &rows[1]["result"];
+    assert_eq!(rows[1]["label"], "constant-velocity");
+    assert!(f64_of(&still["falling_along_gravity"]).abs() < 1e-4, "{still}");
+    // g = 9.81 cells/s² · position_scale · dt² in stored units per frame².
+    let g = f64_of(&still["gravity"][1]);
+    let metadata = json(&data.join("metadata.json"));
+    let (scale, dt) = (
+        f64_of(&metadata["position_scale"]),
+        f64_of(&metadata["dt"]),
+    );
+    approx::assert_relative_eq!(g, -9.81 * scale * dt * dt, max_relative = 1e-12);
+    let e = failed(run(&["--gravity", "0,0"]));
+    assert!(e.contains("--gravity") && e.contains("not zero"), "{e}");
+}

@@ -27,9 +27,11 @@
 //! dataset's stored units.
 
 pub mod metrics;
+pub mod probe;
 mod summary;
 mod trajectory;
 
+pub use probe::{ProbeResult, ProbeScene, probe, probe_scene};
 pub use summary::{Band, ModelSummary};
 pub use trajectory::{
     Curves, EmdCost, EvalOptions, OneStepErrors, TrajectoryEvaluation, evaluate_trajectory,

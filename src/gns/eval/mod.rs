@@ -25,13 +25,13 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 use anyhow::{Context, Result, bail};
-use phi_gns::data::{Dataset, METADATA_FILE};
+use phi_gns::data::{Dataset, METADATA_FILE, Metadata};
 use phi_gns::eval::{
     Band, EmdCost, EvalOptions, ModelSummary, TrajectoryEvaluation, evaluate_trajectory,
     one_step_errors,
 };
 use phi_gns::model::{
-    Gns, GnsKernels, MODEL_FILE, ModelError, ModelSpec, WEIGHTS_FILE, load_model, read_spec,
+    Floor, Gns, GnsKernels, MODEL_FILE, ModelError, ModelSpec, WEIGHTS_FILE, load_model, read_spec,
 };
 use phi_gns::rollout::{RolloutRange, rollout};
 use rayon::prelude::*;
@@ -133,6 +133,11 @@ pub struct EvalArgs {
     /// a dataset].
     #[arg(long, value_enum)]
     pub bounds: Option<BoundsFrom>,
+    /// Also evaluate the floors every model is read against: `constant-velocity` (zero
+    /// acceleration) and `mean-acceleration` (the dataset's mean acceleration for every
+    /// particle), as rows of the table and panels of the GIF.
+    #[arg(long)]
+    pub floors: bool,
 }
 
 /// A model as the command line named it, resolved.
@@ -154,6 +159,9 @@ pub struct ModelEntry {
     /// Which of [`Plan`]'s datasets it is evaluated on: 0 for `--data`, k for the k-th
     /// `--model-data`.
     pub data: usize,
+    /// For a floor (`--floors`): which, and the metadata of the dataset whose statistics it
+    /// predicts from; the model is then built, not read from `dir`.
+    pub floor: Option<(Floor, Box<Metadata>)>,
 }
 
 impl ModelEntry {
@@ -162,6 +170,10 @@ impl ModelEntry {
     /// # Errors
     /// Unreadable or invalid model files.
     pub fn load<B: GnsKernels>(&self, device: &B::Device) -> Result<Gns<B>> {
+        if let Some((floor, metadata)) = &self.floor {
+            let c = self.spec.config.input_velocities;
+            return Ok(floor.model::<B>(metadata, c, device)?);
+        }
         let gns = load_model::<B>(&self.dir, device)?;
         Ok(match &self.bounds {
             Some(bounds) => gns.with_bounds(bounds.clone())?,
@@ -319,6 +331,27 @@ pub fn resolve_model(arg: &str) -> Result<ModelEntry> {
         digest,
         bounds: None,
         data: 0,
+        floor: None,
+    })
+}
+
+/// The entry of `floor` on `metadata`'s dataset, for models of `input_velocities` past
+/// velocities. Its directory is the pseudo-path `floor:NAME`; its digest holds the
+/// acceleration it predicts, so that a cache entry follows the dataset's statistics.
+///
+/// # Errors
+/// A dataset whose statistics make no valid model.
+fn floor_entry(floor: Floor, metadata: &Metadata, input_velocities: usize) -> Result<ModelEntry> {
+    let model = floor.model::<phi_core::backend::Host>(metadata, input_velocities, &Default::default())?;
+    Ok(ModelEntry {
+        label: floor.name().to_string(),
+        dir: PathBuf::from(format!("floor:{}", floor.name())),
+        run: None,
+        spec: model.spec().clone(),
+        digest: format!("floor:{}:{:?}", floor.name(), floor.acceleration(metadata)),
+        bounds: None,
+        data: 0,
+        floor: Some((floor, Box::new(metadata.clone()))),
     })
 }
 
@@ -377,6 +410,19 @@ pub fn plan(args: &EvalArgs) -> Result<Plan> {
             );
         }
         models.push(entry);
+    }
+    if args.floors {
+        let c = models[0].spec.config.input_velocities;
+        for floor in Floor::ALL {
+            if let Some(taken) = models.iter().find(|m| m.label == floor.name()) {
+                bail!(
+                    "--floors: the name '{}' is taken by {}; name it otherwise: --model NAME=DIR",
+                    floor.name(),
+                    taken.dir.display()
+                );
+            }
+            models.push(floor_entry(floor, datasets[0].metadata(), c)?);
+        }
     }
     if let Some((name, ..)) = model_data
         .iter()
