@@ -342,6 +342,10 @@ fn the_floors_join_the_table_and_constant_velocity_rolls_out_straight_lines() {
         stdout.contains("| constant-velocity |") && stdout.contains("| mean-acceleration |"),
         "{stdout}"
     );
+    assert!(
+        stdout.contains("misplaced (%)") && stdout.contains("| plausible |"),
+        "{stdout}"
+    );
     let record = json(&out.join("eval.json"));
     let labels: Vec<&str> = record["models"]
         .as_array()
@@ -365,6 +369,8 @@ fn the_floors_join_the_table_and_constant_velocity_rolls_out_straight_lines() {
         .map(f64_of)
         .collect();
     assert_eq!(curve.len(), 20 - 1 - 5);
+    let plausibility = &entry["evaluation"]["plausibility"];
+    assert!(f64_of(&plausibility["final_centre_distance_cells"]) >= 0.0, "{plausibility}");
     let at = |t: usize, i: usize, a: usize| f64::from(truth.frame(t)[i * 2 + a]);
     for (k, got) in curve.iter().enumerate() {
         let k = k + 1;

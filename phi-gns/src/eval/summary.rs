@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::trajectory::{TrajectoryEvaluation, mse_acc1_in};
+use super::trajectory::{Plausibility, TrajectoryEvaluation, mse_acc1_in};
 
 /// A model's metrics averaged over the evaluated trajectories. A rollout metric is `null`
 /// (infinite) when any trajectory's rollout blew up; `blown_up` counts them.
@@ -31,6 +31,28 @@ pub struct ModelSummary {
     pub kinetic_energy_error: Option<f64>,
     /// Predicted over true mean neighbour count.
     pub density_ratio: Option<f64>,
+    /// The mean over the trajectories of the [`Plausibility`] figures (`null` without a
+    /// container or when a rollout blew up); `misplaced` is outside plus inside obstacles.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plausibility: Option<PlausibilitySummary>,
+}
+
+/// [`Plausibility`] over a model's trajectories.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlausibilitySummary {
+    /// The mean fraction of the liquid's particle-frames outside the domain or inside an
+    /// obstacle.
+    pub misplaced: f64,
+    /// The same fraction of the ground truth's (liquid in partly covered obstacle cells).
+    pub misplaced_true: f64,
+    /// The mean final density ratio.
+    pub final_density_ratio: f64,
+    /// The mean late kinetic-energy ratio.
+    pub late_kinetic_energy_ratio: f64,
+    /// The mean final distance of the centres of mass, cells.
+    pub final_centre_distance_cells: f64,
+    /// The trajectories whose rollout passes [`Plausibility::is_plausible`].
+    pub plausible: usize,
 }
 
 /// The mean of `values` when every one is present, `None` otherwise (or without values).
@@ -76,7 +98,26 @@ impl ModelSummary {
             sinkhorn: of(|e| e.sinkhorn),
             kinetic_energy_error: of(|e| e.kinetic_energy_error),
             density_ratio: of(|e| e.density_ratio),
+            plausibility: PlausibilitySummary::of(evaluations),
         }
+    }
+}
+
+impl PlausibilitySummary {
+    /// The summary when every evaluation has its plausibility figures.
+    fn of(evaluations: &[TrajectoryEvaluation]) -> Option<Self> {
+        let all: Option<Vec<&Plausibility>> =
+            evaluations.iter().map(|e| e.plausibility.as_ref()).collect();
+        let all = all.filter(|a| !a.is_empty())?;
+        let mean = |f: fn(&Plausibility) -> f64| all.iter().map(|p| f(p)).sum::<f64>() / all.len() as f64;
+        Some(PlausibilitySummary {
+            misplaced: mean(|p| p.outside + p.inside_obstacles),
+            misplaced_true: mean(|p| p.inside_obstacles_true),
+            final_density_ratio: mean(|p| p.final_density_ratio),
+            late_kinetic_energy_ratio: mean(|p| p.late_kinetic_energy_ratio),
+            final_centre_distance_cells: mean(|p| p.final_centre_distance_cells),
+            plausible: all.iter().filter(|p| p.is_plausible()).count(),
+        })
     }
 }
 

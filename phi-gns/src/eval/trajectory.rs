@@ -5,7 +5,9 @@ use phi_core::point_sets::{EmdSolver, GroundCost, SinkhornOptions, sinkhorn_dive
 use serde::{Deserialize, Serialize};
 
 use super::EvalError;
-use super::metrics::{kinetic_energy, liquid_positions, mean_neighbour_count};
+use super::metrics::{
+    Container, centre_of_mass, kinetic_energy, liquid_positions, mean_neighbour_count,
+};
 use crate::data::Trajectory;
 use crate::model::{Gns, GnsKernels, GraphBatch, ModelError, Normalisation};
 use crate::rollout::{RolloutRange, input_window, position_mse, rollout};
@@ -13,7 +15,7 @@ use crate::train::loss::{counted_particles, squared_error};
 use crate::train::non_kinematic_mask;
 
 /// What an evaluation computes beyond the model and the data.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EvalOptions {
     /// The length of the short rollouts of MSE 20 (the thesis: 20).
     pub short_rollout: usize,
@@ -26,6 +28,10 @@ pub struct EvalOptions {
     pub sinkhorn_every: usize,
     /// The radius of the neighbour counts of the density (stored units).
     pub density_radius: f64,
+    /// The container of the plausibility metrics (liquid outside the domain or inside an
+    /// obstacle); `null`: not measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub container: Option<Container>,
 }
 
 impl EvalOptions {
@@ -39,6 +45,7 @@ impl EvalOptions {
             sinkhorn_epsilon: 1e-4,
             sinkhorn_every: 100,
             density_radius,
+            container: None,
         }
     }
 }
@@ -81,8 +88,55 @@ pub struct Curves {
     pub kinetic_energy_true: Vec<f64>,
     /// Mean neighbour count of a liquid particle, prediction and truth.
     pub density_predicted: Vec<f64>,
+    /// Liquid particles of the prediction outside the container's bounds (with
+    /// [`EvalOptions::container`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub outside: Vec<usize>,
+    /// Liquid particles of the prediction inside an obstacle cell (with
+    /// [`EvalOptions::container`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub inside_obstacles: Vec<usize>,
+    /// The same of the ground truth: the FLIP liquid in the cells of the obstacle particles
+    /// (cells only partly covered by a rotated obstacle hold liquid in the truth too).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub inside_obstacles_true: Vec<usize>,
     /// See `density_predicted`.
     pub density_true: Vec<f64>,
+}
+
+/// What a physicist checks of a rollout first, each against the ground truth's.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Plausibility {
+    /// The fraction of the liquid's particle-frames outside the domain.
+    pub outside: f64,
+    /// The fraction of the liquid's particle-frames inside an obstacle.
+    pub inside_obstacles: f64,
+    /// The same fraction of the ground truth's.
+    pub inside_obstacles_true: f64,
+    /// Mean neighbour count of the prediction over the truth's at the last frame.
+    pub final_density_ratio: f64,
+    /// Kinetic energy of the prediction over the truth's, summed over the last
+    /// [`LATE_FRAMES`] frames.
+    pub late_kinetic_energy_ratio: f64,
+    /// The distance between the predicted and the true liquid's centres of mass at the last
+    /// frame, in cells.
+    pub final_centre_distance_cells: f64,
+}
+
+/// The frames at the end of a rollout whose kinetic energy [`Plausibility`] compares.
+pub const LATE_FRAMES: usize = 50;
+
+impl Plausibility {
+    /// Whether every figure is within the bounds of a usable simulator: at most 1 % of the
+    /// liquid's particle-frames outside the domain or inside an obstacle, the final density
+    /// within 0.8–1.25 of the truth's, the late kinetic energy within a factor 2 and the
+    /// centre of mass within 2 cells at the end.
+    pub fn is_plausible(&self) -> bool {
+        self.outside + self.inside_obstacles <= 0.01
+            && (0.8..=1.25).contains(&self.final_density_ratio)
+            && (0.5..=2.0).contains(&self.late_kinetic_energy_ratio)
+            && self.final_centre_distance_cells <= 2.0
+    }
 }
 
 /// One trajectory's evaluation. A metric over a rollout that blew up (a non-finite predicted
@@ -126,6 +180,10 @@ pub struct TrajectoryEvaluation {
     pub density_ratio: Option<f64>,
     /// The step at which the full rollout blew up (`null` when it did not).
     pub failed_step: Option<usize>,
+    /// Whether the rollout is physically plausible (`null` without a container or after a
+    /// blow-up): see [`Plausibility`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plausibility: Option<Plausibility>,
     /// The per-frame curves.
     pub curves: Curves,
 }
@@ -203,6 +261,16 @@ pub fn evaluate_trajectory<B: GnsKernels>(
 
     let curves = full.curves;
     let complete = failed.is_none() && curves.mse.len() == steps;
+    let plausibility = match (&options.container, complete, &full.final_centres) {
+        (Some(container), true, Some((predicted, truth))) => Some(plausibility(
+            &curves,
+            liquid_particles,
+            container.cell_size,
+            predicted,
+            truth,
+        )),
+        _ => None,
+    };
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
     let sinkhorns: Vec<f64> = curves.sinkhorn.iter().flatten().copied().collect();
     let (ke_error, density_ratio) = if complete {
@@ -238,8 +306,40 @@ pub fn evaluate_trajectory<B: GnsKernels>(
         kinetic_energy_error: ke_error,
         density_ratio,
         failed_step: failed,
+        plausibility,
         curves,
     })
+}
+
+/// The plausibility figures of a complete rollout's curves and its final centres of mass.
+fn plausibility(
+    curves: &Curves,
+    liquid_particles: usize,
+    cell_size: f64,
+    predicted_centre: &[f64],
+    true_centre: &[f64],
+) -> Plausibility {
+    let frames = curves.mse.len();
+    let particle_frames = (liquid_particles * frames).max(1) as f64;
+    let late = frames.saturating_sub(LATE_FRAMES);
+    let sum = |v: &[f64]| v[late..].iter().sum::<f64>();
+    let last = |v: &[f64]| v.last().copied().unwrap_or(0.0);
+    let distance = predicted_centre
+        .iter()
+        .zip(true_centre)
+        .map(|(a, b)| (a - b) * (a - b))
+        .sum::<f64>()
+        .sqrt();
+    Plausibility {
+        outside: curves.outside.iter().sum::<usize>() as f64 / particle_frames,
+        inside_obstacles: curves.inside_obstacles.iter().sum::<usize>() as f64 / particle_frames,
+        inside_obstacles_true: curves.inside_obstacles_true.iter().sum::<usize>() as f64
+            / particle_frames,
+        final_density_ratio: last(&curves.density_predicted) / last(&curves.density_true),
+        late_kinetic_energy_ratio: sum(&curves.kinetic_energy_predicted)
+            / sum(&curves.kinetic_energy_true),
+        final_centre_distance_cells: distance / cell_size,
+    }
 }
 
 /// The one-step errors of a model on a trajectory.
@@ -378,6 +478,8 @@ fn rollout_mse<B: GnsKernels>(
 struct FullRollout {
     curves: Curves,
     failed_step: Option<usize>,
+    /// The predicted and true liquid's centres of mass at the last frame reached.
+    final_centres: Option<(Vec<f64>, Vec<f64>)>,
 }
 
 /// Rolls out from frame `C` to the last frame, computing the per-frame metrics as frames come.
@@ -398,6 +500,11 @@ fn full_rollout<B: GnsKernels>(
     let mut emd = EmdSolver::new();
     let mut previous = trajectory.frame(c).to_vec();
     let mut metric_error: Option<EvalError> = None;
+    let obstacles = options
+        .container
+        .as_ref()
+        .map(|box_| box_.obstacle_cells(trajectory.frame(c), liquid, dim));
+    let mut final_centres = None;
     let ran = rollout(model, trajectory, range, device, |step, positions| {
         let frame = c + step;
         let truth = trajectory.frame(frame);
@@ -448,6 +555,17 @@ fn full_rollout<B: GnsKernels>(
                 dim,
                 options.density_radius,
             )?);
+            if let (Some(container), Some(obstacles)) = (&options.container, &obstacles) {
+                let (outside, inside) = container.misplaced(positions, liquid, dim, obstacles);
+                curves.outside.push(outside);
+                curves.inside_obstacles.push(inside);
+                let (_, inside_true) = container.misplaced(truth, liquid, dim, obstacles);
+                curves.inside_obstacles_true.push(inside_true);
+            }
+            final_centres = Some((
+                centre_of_mass(positions, liquid, dim),
+                centre_of_mass(truth, liquid, dim),
+            ));
             previous.copy_from_slice(positions);
             Ok(())
         })();
@@ -470,5 +588,6 @@ fn full_rollout<B: GnsKernels>(
     Ok(FullRollout {
         curves,
         failed_step,
+        final_centres,
     })
 }

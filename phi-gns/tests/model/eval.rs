@@ -122,6 +122,10 @@ fn a_trajectory_evaluation_agrees_with_independent_rollouts() {
     let mut options = EvalOptions::new(0.015);
     options.short_rollout = 10;
     options.sinkhorn_every = 13;
+    options.container = Some(phi_gns::eval::metrics::Container {
+        bounds: vec![[0.1, 0.9], [0.1, 0.9]],
+        cell_size: 0.025,
+    });
     let eval = evaluate_trajectory(&model, &trajectory, &options, &device).unwrap();
 
     let steps = frames - 1 - C;
@@ -211,6 +215,36 @@ fn a_trajectory_evaluation_agrees_with_independent_rollouts() {
     assert!(eval.kinetic_energy_error.unwrap() >= 0.0);
     assert!(eval.density_ratio.unwrap() > 0.0);
 
+    // The plausibility figures come from the curves and the final frames.
+    let p = eval.plausibility.clone().expect("a container was given");
+    assert_eq!(eval.curves.outside.len(), steps);
+    let misplaced: usize = eval.curves.outside.iter().sum::<usize>()
+        + eval.curves.inside_obstacles.iter().sum::<usize>();
+    approx::assert_relative_eq!(
+        p.outside + p.inside_obstacles,
+        misplaced as f64 / (8 * steps) as f64,
+        max_relative = 1e-12
+    );
+    approx::assert_relative_eq!(
+        p.final_density_ratio,
+        eval.curves.density_predicted[steps - 1] / eval.curves.density_true[steps - 1],
+        max_relative = 1e-12
+    );
+    let late = |v: &[f64]| v.iter().sum::<f64>();
+    approx::assert_relative_eq!(
+        p.late_kinetic_energy_ratio,
+        late(&eval.curves.kinetic_energy_predicted) / late(&eval.curves.kinetic_energy_true),
+        max_relative = 1e-12
+    );
+    let liquid: Vec<bool> = kinematic.iter().map(|k| !k).collect();
+    let last = &full[(steps - 1) * per_frame..steps * per_frame];
+    let (a, b) = (
+        phi_gns::eval::metrics::centre_of_mass(last, &liquid, 2),
+        phi_gns::eval::metrics::centre_of_mass(trajectory.frame(frames - 1), &liquid, 2),
+    );
+    let distance = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt() / 0.025;
+    approx::assert_relative_eq!(p.final_centre_distance_cells, distance, max_relative = 1e-12);
+
     // One trajectory: the summary is its evaluation, the band its curve with zero width.
     let summary = ModelSummary::of(
         std::slice::from_ref(&eval),
@@ -288,4 +322,57 @@ fn a_blown_up_rollout_makes_the_rollout_metrics_infinite() {
     assert_eq!(band.frame, fine.curves.frame);
     assert!(band.count.iter().all(|&c| c == 1));
     assert_eq!(band.mean, fine.curves.mse);
+}
+
+#[test]
+fn misplaced_liquid_is_counted_outside_the_bounds_and_in_obstacle_cells() {
+    use phi_gns::eval::metrics::{Container, centre_of_mass};
+    let container = Container {
+        bounds: vec![[0.1, 0.9], [0.1, 0.9]],
+        cell_size: 0.025,
+    };
+    // Two obstacle particles at the centres of cells (4, 4) and (5, 4); liquid in cell (4, 4),
+    // next to it in (6, 4), below the domain, and right of it.
+    let centre = |i: usize, j: usize| [0.1 + 0.025 * (i as f32 + 0.5), 0.1 + 0.025 * (j as f32 + 0.5)];
+    let mut frame = Vec::new();
+    for p in [centre(4, 4), centre(5, 4)] {
+        frame.extend(p);
+    }
+    let [x, y] = centre(4, 4);
+    frame.extend([x + 0.01, y - 0.01]); // inside cell (4, 4)
+    frame.extend(centre(6, 4)); // beside the obstacle
+    frame.extend([0.5, 0.09]); // below the floor
+    frame.extend([0.95, 0.5]); // right of the right wall
+    let liquid = [false, false, true, true, true, true];
+    let obstacles = container.obstacle_cells(&frame, &liquid, 2);
+    assert_eq!(obstacles.len(), 2);
+    assert_eq!(container.misplaced(&frame, &liquid, 2, &obstacles), (2, 1));
+    let com = centre_of_mass(&frame, &liquid, 2);
+    let want_x = (f64::from(x) + 0.01 + f64::from(centre(6, 4)[0]) + 0.5 + 0.95) / 4.0;
+    assert!((com[0] - want_x).abs() < 1e-6, "{com:?}");
+}
+
+#[test]
+fn plausibility_needs_every_figure_within_its_bounds() {
+    use phi_gns::eval::Plausibility;
+    let good = Plausibility {
+        outside: 0.004,
+        inside_obstacles: 0.005,
+        inside_obstacles_true: 0.003,
+        final_density_ratio: 1.1,
+        late_kinetic_energy_ratio: 1.8,
+        final_centre_distance_cells: 1.5,
+    };
+    assert!(good.is_plausible());
+    let fails = [
+        Plausibility { outside: 0.006, ..good.clone() },
+        Plausibility { final_density_ratio: 1.3, ..good.clone() },
+        Plausibility { final_density_ratio: 0.7, ..good.clone() },
+        Plausibility { late_kinetic_energy_ratio: 2.1, ..good.clone() },
+        Plausibility { late_kinetic_energy_ratio: 0.4, ..good.clone() },
+        Plausibility { final_centre_distance_cells: 2.5, ..good.clone() },
+    ];
+    for p in fails {
+        assert!(!p.is_plausible(), "{p:?}");
+    }
 }

@@ -26,6 +26,7 @@ use std::sync::Mutex;
 
 use anyhow::{Context, Result, bail};
 use phi_gns::data::{Dataset, METADATA_FILE, Metadata};
+use phi_gns::eval::metrics::Container;
 use phi_gns::eval::{
     Band, EmdCost, EvalOptions, ModelSummary, TrajectoryEvaluation, evaluate_trajectory,
     one_step_errors,
@@ -484,6 +485,10 @@ pub fn plan(args: &EvalArgs) -> Result<Plan> {
         sinkhorn_epsilon: args.sinkhorn_epsilon,
         sinkhorn_every: args.sinkhorn_every,
         density_radius: radius,
+        container: Some(Container {
+            bounds: dataset.metadata().bounds.clone(),
+            cell_size: dataset.metadata().position_scale,
+        }),
     };
     Ok(Plan {
         datasets,
@@ -600,7 +605,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
         dataset: args.data.display().to_string(),
         split: args.split.clone(),
         trajectories: plan.indices.clone(),
-        options: plan.options,
+        options: plan.options.clone(),
         complete: false,
         gif: None,
         models: plan
@@ -747,7 +752,7 @@ fn evaluate_all<B: GnsKernels>(
                     model: model.dir.display().to_string(),
                     digest: model.digest.clone(),
                     split: args.split.clone(),
-                    options: plan.options,
+                    options: plan.options.clone(),
                     evaluation: evaluate_trajectory(&gns, &trajectory, &plan.options, &device)
                         .with_context(context)?,
                 },
@@ -964,7 +969,7 @@ type Column = (
     fn(&ModelSummary) -> Option<f64>,
 );
 
-const COLUMNS: [Column; 7] = [
+const COLUMNS: [Column; 11] = [
     ("EMD (10⁻²)", 1e-2, "emd", |s| s.emd),
     ("MSE-acc 1 (10⁻¹)", 1e-1, "mse_acc1", |s| {
         Some(s.mse_acc1)
@@ -976,6 +981,18 @@ const COLUMNS: [Column; 7] = [
         s.kinetic_energy_error
     }),
     ("density ratio", 1.0, "density_ratio", |s| s.density_ratio),
+    ("misplaced (%)", 1e-2, "misplaced", |s| {
+        s.plausibility.as_ref().map(|p| p.misplaced)
+    }),
+    ("final density", 1.0, "final_density_ratio", |s| {
+        s.plausibility.as_ref().map(|p| p.final_density_ratio)
+    }),
+    ("late KE ratio", 1.0, "late_kinetic_energy_ratio", |s| {
+        s.plausibility.as_ref().map(|p| p.late_kinetic_energy_ratio)
+    }),
+    ("centre (cells)", 1.0, "final_centre_distance_cells", |s| {
+        s.plausibility.as_ref().map(|p| p.final_centre_distance_cells)
+    }),
 ];
 
 /// The markdown table: one row per model, the thesis's four metrics in table B.1's units,
@@ -985,8 +1002,8 @@ pub fn markdown_table(record: &EvalRecord) -> String {
     for (header, ..) in COLUMNS {
         text.push_str(&format!(" {header} |"));
     }
-    text.push_str(" blown up |\n|---|");
-    text.push_str(&"---:|".repeat(COLUMNS.len() + 1));
+    text.push_str(" blown up | plausible |\n|---|");
+    text.push_str(&"---:|".repeat(COLUMNS.len() + 2));
     text.push('\n');
     for model in &record.models {
         let Some(summary) = &model.summary else {
@@ -999,8 +1016,12 @@ pub fn markdown_table(record: &EvalRecord) -> String {
                 None => text.push_str(" inf |"),
             }
         }
+        let plausible = summary
+            .plausibility
+            .as_ref()
+            .map_or("–".to_string(), |p| p.plausible.to_string());
         text.push_str(&format!(
-            " {} of {} |\n",
+            " {} of {} | {plausible} |\n",
             summary.blown_up, summary.trajectories
         ));
     }
@@ -1023,7 +1044,7 @@ pub fn csv_table(record: &EvalRecord) -> String {
         text.push(',');
         text.push_str(name);
     }
-    text.push_str(",blown_up,trajectories\n");
+    text.push_str(",blown_up,trajectories,plausible\n");
     for model in &record.models {
         let Some(summary) = &model.summary else {
             continue;
@@ -1035,7 +1056,14 @@ pub fn csv_table(record: &EvalRecord) -> String {
                 None => text.push_str(",inf"),
             }
         }
-        text.push_str(&format!(",{},{}\n", summary.blown_up, summary.trajectories));
+        let plausible = summary
+            .plausibility
+            .as_ref()
+            .map_or(String::new(), |p| p.plausible.to_string());
+        text.push_str(&format!(
+            ",{},{},{plausible}\n",
+            summary.blown_up, summary.trajectories
+        ));
     }
     text
 }
