@@ -279,7 +279,13 @@ fn parameter_gradients_match_finite_differences_of_the_backend<B: AutodiffBacken
     let params = problem.params::<B>();
     let h = 1e-4;
     let mut rng = Rng::new(12);
-    for round in 0..3 {
+    // Random directions along which the derivative is large enough to compare in f32 (a
+    // direction nearly orthogonal to the gradient is drawn again); three of them are checked.
+    let mut compared = 0;
+    for round in 0..12 {
+        if compared == 3 {
+            break;
+        }
         let directions: Vec<Vec<f64>> = grads
             .params
             .iter()
@@ -307,16 +313,20 @@ fn parameter_gradients_match_finite_differences_of_the_backend<B: AutodiffBacken
             problem.loss_value(moved)
         };
         let fd = (shifted(1.0) - shifted(-1.0)) / (2.0 * h);
-        assert!(
-            fd.abs() > 0.1,
-            "direction {round}: too small a derivative to compare"
-        );
+        if fd.abs() <= 0.1 {
+            continue;
+        }
         assert!(
             (got - fd).abs() <= 5e-3 * fd.abs(),
             "direction {round} on {}: g·d = {got}, central difference {fd}",
             B::name()
         );
+        compared += 1;
     }
+    assert_eq!(
+        compared, 3,
+        "too few directions with a derivative large enough to compare"
+    );
 }
 
 fn position_gradients_are_finite_and_match_finite_differences<B: AutodiffBackend + GnsKernels>() {
