@@ -40,8 +40,8 @@
 use phi_core::backend::Host;
 use phi_core::fields::{Boundary, Domain};
 use phi_geom::{Geometry, Obstacle, Rotation};
-use rand_chacha::ChaCha8Rng;
 use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{FlipError, Result};
@@ -688,7 +688,12 @@ fn cells_inside(
 }
 
 /// `per_cell` particles uniformly at random in every `true` cell, cells in row-major order.
-fn jittered_particles(cells: &[bool], ny: usize, per_cell: usize, rng: &mut ChaCha8Rng) -> Vec<f32> {
+fn jittered_particles(
+    cells: &[bool],
+    ny: usize,
+    per_cell: usize,
+    rng: &mut ChaCha8Rng,
+) -> Vec<f32> {
     let mut positions = Vec::new();
     for (k, _) in cells.iter().enumerate().filter(|(_, c)| **c) {
         let (i, j) = ((k / ny) as f32, (k % ny) as f32);

@@ -79,7 +79,9 @@ pub fn probe_models(args: &ProbeArgs) -> Result<Vec<ProbeRow>> {
         rows.push(ProbeRow {
             label: entry.label.clone(),
             dir: entry.dir.display().to_string(),
-            result: mean_probe(args, &metadata, own, |scene| Ok(probe(&model, scene, &device)?))?,
+            result: mean_probe(args, &metadata, own, |scene| {
+                Ok(probe(&model, scene, &device)?)
+            })?,
         });
     }
     let c = c.expect("at least one --model");
@@ -88,7 +90,9 @@ pub fn probe_models(args: &ProbeArgs) -> Result<Vec<ProbeRow>> {
         rows.push(ProbeRow {
             label: floor.name().to_string(),
             dir: format!("floor:{}", floor.name()),
-            result: mean_probe(args, &metadata, c, |scene| Ok(probe(&model, scene, &device)?))?,
+            result: mean_probe(args, &metadata, c, |scene| {
+                Ok(probe(&model, scene, &device)?)
+            })?,
         });
     }
     Ok(rows)

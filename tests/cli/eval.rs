@@ -370,7 +370,10 @@ fn the_floors_join_the_table_and_constant_velocity_rolls_out_straight_lines() {
         .collect();
     assert_eq!(curve.len(), 20 - 1 - 5);
     let plausibility = &entry["evaluation"]["plausibility"];
-    assert!(f64_of(&plausibility["final_centre_distance_cells"]) >= 0.0, "{plausibility}");
+    assert!(
+        f64_of(&plausibility["final_centre_distance_cells"]) >= 0.0,
+        "{plausibility}"
+    );
     let at = |t: usize, i: usize, a: usize| f64::from(truth.frame(t)[i * 2 + a]);
     for (k, got) in curve.iter().enumerate() {
         let k = k + 1;
@@ -384,6 +387,24 @@ fn the_floors_join_the_table_and_constant_velocity_rolls_out_straight_lines() {
         let want = sum / (2 * liquid.len()) as f64;
         approx::assert_relative_eq!(*got, want, max_relative = 1e-3, epsilon = 1e-12);
     }
+    // An entry written before the plausibility figures is recomputed with them.
+    let path = out.join("cache/model/test_0.json");
+    let mut old = json(&path);
+    old["options"].as_object_mut().unwrap().remove("container");
+    old["evaluation"]
+        .as_object_mut()
+        .unwrap()
+        .remove("plausibility");
+    std::fs::write(&path, serde_json::to_vec(&old).unwrap()).unwrap();
+    ok(eval(
+        &[model.display().to_string()],
+        &data,
+        &out,
+        &["--floors", "--short-rollout", "5", "--sinkhorn-every", "0"],
+    ));
+    let again = json(&path);
+    assert!(again["evaluation"]["plausibility"].is_object(), "{again}");
+    assert!(again["options"]["container"].is_object(), "{again}");
 }
 
 #[test]
@@ -412,14 +433,14 @@ fn probe_reads_free_fall_and_rest_beside_the_floors() {
     assert_eq!(rows[0]["label"], "model");
     let still = &rows[1]["result"];
     assert_eq!(rows[1]["label"], "constant-velocity");
-    assert!(f64_of(&still["falling_along_gravity"]).abs() < 1e-4, "{still}");
+    assert!(
+        f64_of(&still["falling_along_gravity"]).abs() < 1e-4,
+        "{still}"
+    );
     // g = 9.81 cells/s² · position_scale · dt² in stored units per frame².
     let g = f64_of(&still["gravity"][1]);
     let metadata = json(&data.join("metadata.json"));
-    let (scale, dt) = (
-        f64_of(&metadata["position_scale"]),
-        f64_of(&metadata["dt"]),
-    );
+    let (scale, dt) = (f64_of(&metadata["position_scale"]), f64_of(&metadata["dt"]));
     approx::assert_relative_eq!(g, -9.81 * scale * dt * dt, max_relative = 1e-12);
     let e = failed(run(&["--gravity", "0,0"]));
     assert!(e.contains("--gravity") && e.contains("not zero"), "{e}");

@@ -111,10 +111,12 @@ pub fn probe_scene(
     seed: u64,
 ) -> Result<ProbeScene, EvalError> {
     let dim = metadata.dim;
-    let fail = |reason: String| Err(EvalError::Input {
-        what: "probe scene",
-        reason,
-    });
+    let fail = |reason: String| {
+        Err(EvalError::Input {
+            what: "probe scene",
+            reason,
+        })
+    };
     if gravity_cells.len() != dim {
         return fail(format!(
             "gravity has {} components for a {dim}D dataset",
@@ -255,7 +257,12 @@ pub fn probe<B: GnsKernels>(
     let mean_of = |which: bool| -> Vec<f64> {
         let mut sum = vec![0.0f64; dim];
         let mut count = 0usize;
-        for (i, _) in scene.falling.iter().enumerate().filter(|(_, f)| **f == which) {
+        for (i, _) in scene
+            .falling
+            .iter()
+            .enumerate()
+            .filter(|(_, f)| **f == which)
+        {
             count += 1;
             for (a, s) in sum.iter_mut().enumerate() {
                 *s += f64::from(predicted[i * dim + a]);

@@ -106,10 +106,13 @@ impl ModelSummary {
 impl PlausibilitySummary {
     /// The summary when every evaluation has its plausibility figures.
     fn of(evaluations: &[TrajectoryEvaluation]) -> Option<Self> {
-        let all: Option<Vec<&Plausibility>> =
-            evaluations.iter().map(|e| e.plausibility.as_ref()).collect();
+        let all: Option<Vec<&Plausibility>> = evaluations
+            .iter()
+            .map(|e| e.plausibility.as_ref())
+            .collect();
         let all = all.filter(|a| !a.is_empty())?;
-        let mean = |f: fn(&Plausibility) -> f64| all.iter().map(|p| f(p)).sum::<f64>() / all.len() as f64;
+        let mean =
+            |f: fn(&Plausibility) -> f64| all.iter().map(|p| f(p)).sum::<f64>() / all.len() as f64;
         Some(PlausibilitySummary {
             misplaced: mean(|p| p.outside + p.inside_obstacles),
             misplaced_true: mean(|p| p.inside_obstacles_true),

@@ -71,10 +71,7 @@ impl Floor {
         let mut spec = ModelSpec::for_dataset(metadata, config, 0);
         spec.provenance = serde_json::json!({ "floor": self.name() });
         spec.validate(std::path::Path::new("model.json"))?;
-        let scale = super::Normalisation::scale(
-            &spec.normalisation.acc_std,
-            spec.config.noise_std,
-        );
+        let scale = super::Normalisation::scale(&spec.normalisation.acc_std, spec.config.noise_std);
         let bias: Vec<f32> = self
             .acceleration(metadata)
             .iter()

@@ -37,8 +37,8 @@
 
 pub mod config;
 pub mod features;
-pub mod floor;
 pub mod files;
+pub mod floor;
 pub mod kernels;
 pub mod network;
 pub mod params;
@@ -51,8 +51,8 @@ use phi_core::tensor::{IntTensor, Tensor};
 use crate::graph::{ExamplePositions, GraphError, RadiusGraph};
 pub use config::{GnsConfig, MODEL_FORMAT, MODEL_FORMAT_VERSION, ModelSpec, Normalisation};
 pub use features::Normalisers;
-pub use floor::Floor;
 pub use files::{MODEL_FILE, WEIGHTS_FILE, load_model, read_spec, save_model};
+pub use floor::Floor;
 pub use kernels::GnsKernels;
 pub use params::{Init, ParameterSpec, Parameters, parameter_layout};
 

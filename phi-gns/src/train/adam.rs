@@ -205,7 +205,10 @@ impl<B: Backend> Adam<B> {
                     reason: format!("'{name}': a non-finite gradient"),
                 });
             }
-            squared_norm += values.iter().map(|&x| f64::from(x) * f64::from(x)).sum::<f64>();
+            squared_norm += values
+                .iter()
+                .map(|&x| f64::from(x) * f64::from(x))
+                .sum::<f64>();
         }
         let c = self.config;
         let scale = clip_scale(c.clip_norm, squared_norm.sqrt());

@@ -439,7 +439,10 @@ mod tests {
         let text = preset();
         let plain = TrainConfig::from_toml(&text, "preset.toml").unwrap();
         assert_eq!(plain.training.error_norm(), ErrorNorm::Squared);
-        assert!(!plain.to_toml().contains("loss ="), "the default is left unsaid");
+        assert!(
+            !plain.to_toml().contains("loss ="),
+            "the default is left unsaid"
+        );
         let huber = text.replace("log_every = 100", "log_every = 100\nloss = \"huber\"");
         let c = TrainConfig::from_toml(&huber, "preset.toml").unwrap();
         assert_eq!(c.training.error_norm(), ErrorNorm::Huber { delta: 1.0 });
@@ -448,9 +451,15 @@ mod tests {
         assert_eq!(c.training.error_norm(), ErrorNorm::Huber { delta: 2.5 });
         assert_eq!(TrainConfig::from_toml(&c.to_toml(), "stored").unwrap(), c);
         let e = refusal(&text.replace("log_every = 100", "log_every = 100\nhuber_delta = 2.0"));
-        assert!(e.contains("training.huber_delta") && e.contains("huber"), "{e}");
+        assert!(
+            e.contains("training.huber_delta") && e.contains("huber"),
+            "{e}"
+        );
         let e = refusal(&delta.replace("huber_delta = 2.5", "huber_delta = -1.0"));
-        assert!(e.contains("training.huber_delta") && e.contains("-1"), "{e}");
+        assert!(
+            e.contains("training.huber_delta") && e.contains("-1"),
+            "{e}"
+        );
         let e = refusal(&text.replace("log_every = 100", "log_every = 100\nloss = \"l1\""));
         assert!(e.contains("l1"), "{e}");
     }

@@ -37,9 +37,8 @@ use super::sampler::WindowSpec;
 use super::screening::{Screening, screen};
 use super::stream::{BatchConfig, BatchSource, BatchStream, HostBatch};
 use super::{
-    ErrorNorm,
-    Adam, TrainError, multi_step_loss, non_kinematic_mask, pushforward_loss, random_walk_noise,
-    train_step_with,
+    Adam, ErrorNorm, TrainError, multi_step_loss, non_kinematic_mask, pushforward_loss,
+    random_walk_noise, train_step_with,
 };
 use crate::data::{Dataset, METADATA_FILE, Trajectory};
 use crate::model::{Gns, GnsKernels, GraphBatch, ModelError, load_model};

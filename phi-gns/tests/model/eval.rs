@@ -243,7 +243,11 @@ fn a_trajectory_evaluation_agrees_with_independent_rollouts() {
         phi_gns::eval::metrics::centre_of_mass(trajectory.frame(frames - 1), &liquid, 2),
     );
     let distance = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt() / 0.025;
-    approx::assert_relative_eq!(p.final_centre_distance_cells, distance, max_relative = 1e-12);
+    approx::assert_relative_eq!(
+        p.final_centre_distance_cells,
+        distance,
+        max_relative = 1e-12
+    );
 
     // One trajectory: the summary is its evaluation, the band its curve with zero width.
     let summary = ModelSummary::of(
@@ -333,7 +337,12 @@ fn misplaced_liquid_is_counted_outside_the_bounds_and_in_obstacle_cells() {
     };
     // Two obstacle particles at the centres of cells (4, 4) and (5, 4); liquid in cell (4, 4),
     // next to it in (6, 4), below the domain, and right of it.
-    let centre = |i: usize, j: usize| [0.1 + 0.025 * (i as f32 + 0.5), 0.1 + 0.025 * (j as f32 + 0.5)];
+    let centre = |i: usize, j: usize| {
+        [
+            0.1 + 0.025 * (i as f32 + 0.5),
+            0.1 + 0.025 * (j as f32 + 0.5),
+        ]
+    };
     let mut frame = Vec::new();
     for p in [centre(4, 4), centre(5, 4)] {
         frame.extend(p);
@@ -365,12 +374,30 @@ fn plausibility_needs_every_figure_within_its_bounds() {
     };
     assert!(good.is_plausible());
     let fails = [
-        Plausibility { outside: 0.006, ..good.clone() },
-        Plausibility { final_density_ratio: 1.3, ..good.clone() },
-        Plausibility { final_density_ratio: 0.7, ..good.clone() },
-        Plausibility { late_kinetic_energy_ratio: 2.1, ..good.clone() },
-        Plausibility { late_kinetic_energy_ratio: 0.4, ..good.clone() },
-        Plausibility { final_centre_distance_cells: 2.5, ..good.clone() },
+        Plausibility {
+            outside: 0.006,
+            ..good.clone()
+        },
+        Plausibility {
+            final_density_ratio: 1.3,
+            ..good.clone()
+        },
+        Plausibility {
+            final_density_ratio: 0.7,
+            ..good.clone()
+        },
+        Plausibility {
+            late_kinetic_energy_ratio: 2.1,
+            ..good.clone()
+        },
+        Plausibility {
+            late_kinetic_energy_ratio: 0.4,
+            ..good.clone()
+        },
+        Plausibility {
+            final_centre_distance_cells: 2.5,
+            ..good.clone()
+        },
     ];
     for p in fails {
         assert!(!p.is_plausible(), "{p:?}");

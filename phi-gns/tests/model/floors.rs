@@ -3,8 +3,8 @@
 //! block falls with exactly gravity and its pool is at rest, and the probe reads the floors'
 //! predictions back as the fractions of gravity they are.
 
-use phi_core::backend::ndarray::NdArray;
 use phi_core::Backend;
+use phi_core::backend::ndarray::NdArray;
 use phi_gns::data::LIQUID;
 use phi_gns::eval::{probe, probe_scene};
 use phi_gns::model::{Floor, GraphBatch};
@@ -22,8 +22,9 @@ fn a_floor_predicts_its_constant_acceleration_everywhere() {
     let n = scene.particle_type.len();
     for floor in Floor::ALL {
         let model = floor.model::<NdArray>(&metadata, 5, &device).unwrap();
-        let batch = GraphBatch::from_host(&scene.window, &scene.particle_type, model.spec(), &device)
-            .unwrap();
+        let batch =
+            GraphBatch::from_host(&scene.window, &scene.particle_type, model.spec(), &device)
+                .unwrap();
         let predicted = model.acceleration(&batch).unwrap().to_vec();
         let want = floor.acceleration(&metadata);
         for i in 0..n {
@@ -51,7 +52,10 @@ fn a_floor_predicts_its_constant_acceleration_everywhere() {
             }
         }
     }
-    assert_eq!(Floor::from_name("mean-acceleration"), Some(Floor::MeanAcceleration));
+    assert_eq!(
+        Floor::from_name("mean-acceleration"),
+        Some(Floor::MeanAcceleration)
+    );
     assert_eq!(Floor::from_name("gravity"), None);
 }
 
@@ -78,9 +82,16 @@ fn the_probe_scene_falls_with_gravity_above_a_pool_at_rest() {
         for k in 1..c {
             for a in 0..2 {
                 let second = at(k + 1, a) - 2.0 * at(k, a) + at(k - 1, a);
-                let want = if scene.falling[i] { scene.gravity[a] } else { 0.0 };
+                let want = if scene.falling[i] {
+                    scene.gravity[a]
+                } else {
+                    0.0
+                };
                 // f32 positions of ~0.5: second differences good to a few 1e-8.
-                assert!((second - want).abs() < 2e-7, "particle {i} frame {k} axis {a}");
+                assert!(
+                    (second - want).abs() < 2e-7,
+                    "particle {i} frame {k} axis {a}"
+                );
             }
         }
         if scene.falling[i] {
@@ -106,24 +117,40 @@ fn the_probe_reads_the_floors_as_fractions_of_gravity() {
     // A dataset whose mean acceleration is gravity: the mean-acceleration floor is exact for
     // the falling block and wrong by |g| for the pool.
     metadata.acc_mean = scene.gravity.clone();
-    let exact = Floor::MeanAcceleration.model::<NdArray>(&metadata, 5, &device).unwrap();
+    let exact = Floor::MeanAcceleration
+        .model::<NdArray>(&metadata, 5, &device)
+        .unwrap();
     let r = probe(&exact, &scene, &device).unwrap();
     assert!((r.falling_along_gravity - 1.0).abs() < 1e-4, "{r:?}");
     assert!(r.falling_across_gravity < 1e-4, "{r:?}");
     assert!((r.resting_over_gravity - 1.0).abs() < 1e-4, "{r:?}");
-    assert!((r.resting_rms / scene.gravity[1].abs() - 1.0).abs() < 1e-4, "{r:?}");
-    let still = Floor::ConstantVelocity.model::<NdArray>(&metadata, 5, &device).unwrap();
+    assert!(
+        (r.resting_rms / scene.gravity[1].abs() - 1.0).abs() < 1e-4,
+        "{r:?}"
+    );
+    let still = Floor::ConstantVelocity
+        .model::<NdArray>(&metadata, 5, &device)
+        .unwrap();
     let r = probe(&still, &scene, &device).unwrap();
-    assert!(r.falling_along_gravity.abs() < 1e-4 && r.resting_over_gravity < 1e-4, "{r:?}");
+    assert!(
+        r.falling_along_gravity.abs() < 1e-4 && r.resting_over_gravity < 1e-4,
+        "{r:?}"
+    );
 }
 
 #[test]
 fn a_probe_scene_that_does_not_fit_is_refused() {
     let metadata = common::metadata();
-    let error = probe_scene(&metadata, 5, &[0.0], 8, 4, 0).unwrap_err().to_string();
+    let error = probe_scene(&metadata, 5, &[0.0], 8, 4, 0)
+        .unwrap_err()
+        .to_string();
     assert!(error.contains("gravity has 1 components"), "{error}");
-    let error = probe_scene(&metadata, 5, &[0.0, 0.0], 8, 4, 0).unwrap_err().to_string();
+    let error = probe_scene(&metadata, 5, &[0.0, 0.0], 8, 4, 0)
+        .unwrap_err()
+        .to_string();
     assert!(error.contains("not zero"), "{error}");
-    let error = probe_scene(&metadata, 5, &G, 8, 60, 0).unwrap_err().to_string();
+    let error = probe_scene(&metadata, 5, &G, 8, 60, 0)
+        .unwrap_err()
+        .to_string();
     assert!(error.contains("fewer fallen frames"), "{error}");
 }

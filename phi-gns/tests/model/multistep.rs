@@ -15,8 +15,8 @@ use phi_core::{AutodiffBackend, Tensor};
 use phi_gns::data::{LIQUID, OBSTACLE};
 use phi_gns::graph::RadiusGraph;
 use phi_gns::model::{Gns, GnsKernels, GraphBatch, ModelError, Normalisation};
-use phi_gns::train::{ErrorNorm, 
-    Pushforward, acceleration_loss, multi_step_loss, non_kinematic_mask, one_step_loss,
+use phi_gns::train::{
+    ErrorNorm, Pushforward, acceleration_loss, multi_step_loss, non_kinematic_mask, one_step_loss,
     push_forward, pushforward_loss, random_walk_noise,
 };
 use rand::SeedableRng;
@@ -231,7 +231,13 @@ fn without_extra_steps_both_losses_are_the_one_step_loss<B: GnsKernels>() {
     let n = p.particles();
     let truth = p.truth(0..2);
     let scalar = |loss: Result<Tensor<B>, ModelError>| loss.unwrap().to_scalar().unwrap();
-    let one = scalar(one_step_loss(&p.model, &p.batch, &p.next(), &p.mask, ErrorNorm::Squared));
+    let one = scalar(one_step_loss(
+        &p.model,
+        &p.batch,
+        &p.next(),
+        &p.mask,
+        ErrorNorm::Squared,
+    ));
     let multi = scalar(multi_step_loss(
         &p.model,
         &p.batch,
@@ -256,9 +262,19 @@ fn without_extra_steps_both_losses_are_the_one_step_loss<B: GnsKernels>() {
     let noisy = p.batch_of(&noise.apply(&p.scene.window));
     let adjusted =
         Tensor::<B>::from_vec(noise.adjust_target(&p.frame(1)), &[n, 2], &device).unwrap();
-    let one_noisy = scalar(one_step_loss(&p.model, &noisy, &adjusted, &p.mask, ErrorNorm::Squared));
+    let one_noisy = scalar(one_step_loss(
+        &p.model,
+        &noisy,
+        &adjusted,
+        &p.mask,
+        ErrorNorm::Squared,
+    ));
     let multi_noisy = scalar(multi_step_loss(
-        &p.model, &noisy, &adjusted, &truth, &p.mask,
+        &p.model,
+        &noisy,
+        &adjusted,
+        &truth,
+        &p.mask,
         ErrorNorm::Squared,
     ));
     assert_ne!(one_noisy, one, "the noise changes the loss");
@@ -266,23 +282,51 @@ fn without_extra_steps_both_losses_are_the_one_step_loss<B: GnsKernels>() {
 
     // Inputs that do not fit are refused with the input named.
     let short = p.truth(0..1);
-    let error = multi_step_loss(&p.model, &p.batch, &p.next(), &short, &p.mask, ErrorNorm::Squared)
-        .unwrap_err()
-        .to_string();
+    let error = multi_step_loss(
+        &p.model,
+        &p.batch,
+        &p.next(),
+        &short,
+        &p.mask,
+        ErrorNorm::Squared,
+    )
+    .unwrap_err()
+    .to_string();
     assert!(error.contains("multi-step truth"), "{error}");
-    let error = pushforward_loss(&p.model, &p.batch, &p.next(), &short, &p.mask, ErrorNorm::Squared)
-        .unwrap_err()
-        .to_string();
+    let error = pushforward_loss(
+        &p.model,
+        &p.batch,
+        &p.next(),
+        &short,
+        &p.mask,
+        ErrorNorm::Squared,
+    )
+    .unwrap_err()
+    .to_string();
     assert!(error.contains("pushforward truth"), "{error}");
     let none = Tensor::<B>::zeros(&[n], &device);
-    let error = multi_step_loss(&p.model, &p.batch, &p.next(), &p.truth(0..3), &none, ErrorNorm::Squared)
-        .unwrap_err()
-        .to_string();
+    let error = multi_step_loss(
+        &p.model,
+        &p.batch,
+        &p.next(),
+        &p.truth(0..3),
+        &none,
+        ErrorNorm::Squared,
+    )
+    .unwrap_err()
+    .to_string();
     assert!(error.contains("no particle"), "{error}");
     let wide = Tensor::<B>::ones(&[n, 1], &device);
-    let error = multi_step_loss(&p.model, &p.batch, &p.next(), &p.truth(0..3), &wide, ErrorNorm::Squared)
-        .unwrap_err()
-        .to_string();
+    let error = multi_step_loss(
+        &p.model,
+        &p.batch,
+        &p.next(),
+        &p.truth(0..3),
+        &wide,
+        ErrorNorm::Squared,
+    )
+    .unwrap_err()
+    .to_string();
     assert!(error.contains("loss mask"), "{error}");
 }
 
@@ -369,9 +413,23 @@ fn push_forward_is_next_positions_repeated_with_kinematic_particles_reset<B: Gns
         // The loss takes the one-step loss on that window against the true acceleration.
         if k >= 1 {
             let truth = p.truth(0..k + 2);
-            let got = pushforward_loss(&p.model, &p.batch, &p.next(), &truth, &p.mask, ErrorNorm::Squared).unwrap();
-            let expected =
-                acceleration_loss(&p.model, &expected, &p.true_acceleration(k), &p.mask, ErrorNorm::Squared).unwrap();
+            let got = pushforward_loss(
+                &p.model,
+                &p.batch,
+                &p.next(),
+                &truth,
+                &p.mask,
+                ErrorNorm::Squared,
+            )
+            .unwrap();
+            let expected = acceleration_loss(
+                &p.model,
+                &expected,
+                &p.true_acceleration(k),
+                &p.mask,
+                ErrorNorm::Squared,
+            )
+            .unwrap();
             assert_eq!(
                 got.to_scalar().unwrap().to_bits(),
                 expected.to_scalar().unwrap().to_bits(),
@@ -510,7 +568,15 @@ fn multi_step_gradients_match_finite_differences<B: AutodiffBackend + GnsKernels
     for steps in [1, 2] {
         let truth = p.truth(0..steps + 2);
         let (g, loss) = gradients(&p.model, |model| {
-            multi_step_loss(model, &p.batch, &p.next(), &truth, &p.mask, ErrorNorm::Squared).unwrap()
+            multi_step_loss(
+                model,
+                &p.batch,
+                &p.next(),
+                &truth,
+                &p.mask,
+                ErrorNorm::Squared,
+            )
+            .unwrap()
         });
         let (host_loss, graphs) = p.host_multi_step_loss(&host, steps);
         assert!(
@@ -524,11 +590,19 @@ fn multi_step_gradients_match_finite_differences<B: AutodiffBackend + GnsKernels
         }
         // The gradient with the later windows held fixed (detached).
         let (held, _) = gradients(&p.model, |model| {
-            let mut total = one_step_loss(model, &p.batch, &p.next(), &p.mask, ErrorNorm::Squared).unwrap();
+            let mut total =
+                one_step_loss(model, &p.batch, &p.next(), &p.mask, ErrorNorm::Squared).unwrap();
             for i in 1..=steps {
                 let window = push_forward(model, &p.batch, &p.truth(1..i + 1), &p.mask).unwrap();
                 total = total
-                    + acceleration_loss(model, &window, &p.true_acceleration(i), &p.mask, ErrorNorm::Squared).unwrap();
+                    + acceleration_loss(
+                        model,
+                        &window,
+                        &p.true_acceleration(i),
+                        &p.mask,
+                        ErrorNorm::Squared,
+                    )
+                    .unwrap();
             }
             total / (steps + 1) as f32
         });
@@ -603,13 +677,28 @@ fn pushforward_gradients_are_those_of_the_pushed_forward_window_held_fixed<
     let k = 2;
     let truth = p.truth(0..k + 2);
     let (got, loss) = gradients(&p.model, |model| {
-        pushforward_loss(model, &p.batch, &p.next(), &truth, &p.mask, ErrorNorm::Squared).unwrap()
+        pushforward_loss(
+            model,
+            &p.batch,
+            &p.next(),
+            &truth,
+            &p.mask,
+            ErrorNorm::Squared,
+        )
+        .unwrap()
     });
     // The window of k unrolls, rebuilt from host values: nothing ties it to the parameters.
     let pushed = push_forward(&p.model, &p.batch, &p.truth(1..k + 1), &p.mask).unwrap();
     let fixed = p.batch_of(&pushed.positions().to_vec());
     let (expected, expected_loss) = gradients(&p.model, |model| {
-        acceleration_loss(model, &fixed, &p.true_acceleration(k), &p.mask, ErrorNorm::Squared).unwrap()
+        acceleration_loss(
+            model,
+            &fixed,
+            &p.true_acceleration(k),
+            &p.mask,
+            ErrorNorm::Squared,
+        )
+        .unwrap()
     });
     assert_eq!(loss, expected_loss, "{}", B::name());
     for (name, (a, b)) in p
@@ -633,7 +722,14 @@ fn pushforward_gradients_are_those_of_the_pushed_forward_window_held_fixed<
             let next = Tensor::select(&free, &next, &truth).unwrap();
             window = window.advance(&next, model.spec()).unwrap();
         }
-        acceleration_loss(model, &window, &p.true_acceleration(k), &p.mask, ErrorNorm::Squared).unwrap()
+        acceleration_loss(
+            model,
+            &window,
+            &p.true_acceleration(k),
+            &p.mask,
+            ErrorNorm::Squared,
+        )
+        .unwrap()
     });
     let difference: f64 = tracked
         .iter()

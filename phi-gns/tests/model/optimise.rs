@@ -5,9 +5,9 @@
 use phi_core::{AutodiffBackend, Backend, Tensor};
 use phi_gns::data::OBSTACLE;
 use phi_gns::model::{Gns, GnsKernels, GraphBatch};
-use phi_gns::train::{ErrorNorm, 
-    Adam, AdamConfig, LearningRate, multi_step_loss, non_kinematic_mask, random_walk_noise,
-    train_step, train_step_with,
+use phi_gns::train::{
+    Adam, AdamConfig, ErrorNorm, LearningRate, multi_step_loss, non_kinematic_mask,
+    random_walk_noise, train_step, train_step_with,
 };
 use rand::SeedableRng;
 use rand::rngs::StdRng;

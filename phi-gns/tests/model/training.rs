@@ -220,7 +220,13 @@ fn huber_loss_is_quadratic_inside_delta_and_linear_outside<B: GnsKernels>() {
     let delta = sizes[sizes.len() / 2];
     let expected = sizes
         .iter()
-        .map(|&r| if r <= delta { r * r } else { 2.0 * delta * r - delta * delta })
+        .map(|&r| {
+            if r <= delta {
+                r * r
+            } else {
+                2.0 * delta * r - delta * delta
+            }
+        })
         .sum::<f64>()
         / counted.len() as f64;
     let huber = ErrorNorm::Huber {
@@ -243,7 +249,11 @@ fn huber_loss_is_quadratic_inside_delta_and_linear_outside<B: GnsKernels>() {
             .to_scalar()
             .unwrap(),
     );
-    assert!(got < squared, "{}: outliers cost less than squared", B::name());
+    assert!(
+        got < squared,
+        "{}: outliers cost less than squared",
+        B::name()
+    );
     // A δ above every error is the squared error.
     let wide = ErrorNorm::Huber {
         delta: (sizes[sizes.len() - 1] * 2.0) as f32,

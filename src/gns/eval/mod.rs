@@ -343,7 +343,8 @@ pub fn resolve_model(arg: &str) -> Result<ModelEntry> {
 /// # Errors
 /// A dataset whose statistics make no valid model.
 fn floor_entry(floor: Floor, metadata: &Metadata, input_velocities: usize) -> Result<ModelEntry> {
-    let model = floor.model::<phi_core::backend::Host>(metadata, input_velocities, &Default::default())?;
+    let model =
+        floor.model::<phi_core::backend::Host>(metadata, input_velocities, &Default::default())?;
     Ok(ModelEntry {
         label: floor.name().to_string(),
         dir: PathBuf::from(format!("floor:{}", floor.name())),
@@ -928,6 +929,16 @@ fn read_cache(
             entry.split
         );
     }
+    let mut older = entry.options.clone();
+    older.container.clone_from(&options.container);
+    if entry.options.container.is_none() && options.container.is_some() && older == *options {
+        // Written before the plausibility figures: the same evaluation, recomputed with them.
+        tracing::info!(
+            "{}: an evaluation without the plausibility figures, recomputed",
+            path.display()
+        );
+        return Ok(None);
+    }
     if entry.options != *options {
         bail!(
             "{}: computed with other options ({:?}) than this run's ({:?}): use another --out \
@@ -991,7 +1002,9 @@ const COLUMNS: [Column; 11] = [
         s.plausibility.as_ref().map(|p| p.late_kinetic_energy_ratio)
     }),
     ("centre (cells)", 1.0, "final_centre_distance_cells", |s| {
-        s.plausibility.as_ref().map(|p| p.final_centre_distance_cells)
+        s.plausibility
+            .as_ref()
+            .map(|p| p.final_centre_distance_cells)
     }),
 ];
 
