@@ -2,8 +2,9 @@
 # Builds phi (release, default backends) and simulates every example scene in scenes/ on the
 # default ndarray backend. Each run writes out/<scene>/: trajectory.npz, run.json, frames/ and
 # simulation.gif. Extra arguments go to every `phi simulate` call (e.g. --backend burn).
-# Then the learned simulator shipped in experiments/cpu/2si/best (the CPU-scale 2si model of
-# docs/gns.md) rolls out test scene 5 of the thesis's dataset next to its FLIP ground truth:
+# Then the learned simulator shipped in experiments/levers/mse-clip-warmup-2000 (the best
+# CPU-scale model of docs/gns.md, "What limits learning") rolls out test scene 5 of the thesis's
+# dataset next to its FLIP ground truth:
 # out/gns-rollout/test_4/rollout.gif.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
@@ -16,7 +17,7 @@ for scene in scenes/*.toml; do
 done
 # The first five test scenes of table 5.1 (the same as in `phi dataset generate --split all`).
 target/release/phi dataset generate --out out/gns-test --split test --count 5
-target/release/phi rollout --model experiments/cpu/2si/best --data out/gns-test --index 4 \
+target/release/phi rollout --model experiments/levers/mse-clip-warmup-2000 --data out/gns-test --index 4 \
     --out out/gns-rollout --frame-every 2
 echo
 echo "GIFs:"
