@@ -88,6 +88,10 @@ pub struct RolloutArgs {
     /// The backend [default: ndarray].
     #[arg(long)]
     pub backend: Option<BackendKind>,
+    /// The device the model runs on: `cpu`, or `cuda` / `cuda:N` on the tch backend of a
+    /// `--features tch,cuda` build.
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
     /// The output directory: one folder `<split>_<index>` per trajectory.
     #[arg(long)]
     pub out: PathBuf,
@@ -369,7 +373,14 @@ pub fn run(args: RolloutArgs) -> Result<()> {
 /// Loads the model on backend `B` and rolls it out on each planned trajectory, printing each
 /// one's summary.
 fn roll_all<B: GnsKernels>(plan: &Plan, args: &RolloutArgs) -> Result<Vec<RolloutRecord>> {
-    let device = B::default_device();
+    let Some(device) = B::device_by_name(&args.device) else {
+        bail!(
+            "--device {}: not available on the {} backend of this build ({})",
+            args.device,
+            B::name(),
+            super::train::devices_hint(B::name())
+        );
+    };
     let mut model = load_model::<B>(&args.model, &device)?;
     if let Some(bounds) = &plan.bounds {
         model = model.with_bounds(bounds.clone())?;

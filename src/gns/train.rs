@@ -153,7 +153,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
 /// The devices `--device` takes on a backend of this build, for the message that refuses another.
 /// A build without the `cuda` feature leaves libtorch's CUDA library unlinked (see build.rs), so
 /// its tch backend sees no CUDA device even on a GPU machine.
-fn devices_hint(backend: &str) -> &'static str {
+pub(crate) fn devices_hint(backend: &str) -> &'static str {
     match backend {
         "tch" if cfg!(feature = "cuda") => {
             "cpu, or cuda / cuda:N where libtorch sees that CUDA device"

@@ -458,6 +458,12 @@ fn rollout_refuses_foreign_outputs_and_missing_trajectories() {
     );
     let stderr = failed(rollout(&model, &data, &out, &["--split", "train"]));
     assert!(stderr.contains("no split 'train'"), "{stderr}");
+    // A device that is not there (this is not a CUDA build, or it has no eighth GPU).
+    let stderr = failed(rollout(&model, &data, &out, &["--device", "cuda:7"]));
+    assert!(
+        stderr.contains("--device cuda:7") && stderr.contains("not available"),
+        "{stderr}"
+    );
     let stderr = failed(rollout(&model, &data, &out, &["--steps", "5"]));
     assert!(
         stderr.contains("--steps 5") && stderr.contains("frame 9"),
