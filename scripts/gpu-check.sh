@@ -1,36 +1,45 @@
 #!/usr/bin/env bash
 # Checks a CUDA build of phi on a machine with an NVIDIA GPU and PyTorch 2.11 installed in its
-# Python, but no Rust toolchain: the binary is built elsewhere and copied over.
-#
-# Not yet run on a GPU: this script states the procedure; its numbers belong in docs/gns.md only
-# once a run has produced them.
+# Python, but no Rust toolchain (the binary is built elsewhere and copied over), then trains the
+# thesis-size models for the time that is left. One run, about 9 minutes, whose numbers
+# docs/gns.md ("Training on a GPU") and docs/benchmarks.md report.
 #
 # On the build machine:
 #   bash scripts/setup-libtorch.sh
 #   cargo build --release --features tch,cuda --bin phi
-#   strip target/release/phi            # the release binary carries line tables
-# On the GPU machine, from the repository root (for configs/gns/1sn.toml):
-#   scripts/gpu-check.sh [PHI_BINARY]   # default target/release/phi
+#   strip -o phi-cuda target/release/phi
+# On the GPU machine, from the repository root:
+#   BUDGET=560 scripts/gpu-check.sh [PHI_BINARY]     # default target/release/phi
 #
-# It finds libtorch in the system Python's site-packages (torch/lib and the nvidia/*/lib folders of
-# the CUDA wheels) and puts it on LD_LIBRARY_PATH, since the rpath baked in at build time points at
-# the build machine's copy. Then, each step bounded by `timeout`, about 8 minutes at most in all:
-#   1. a small dataset made by the binary itself (6 training trajectories, 1 validation);
-#   2. 20 steps of `phi train --backend tch --device cpu` at the thesis scale (configs/gns/1sn.toml);
-#   3. 300 steps of the same on `--device cuda`.
-# It prints steps/s of both (train.csv's steps_per_second, the last row: warm-up excluded) and their
-# ratio, and the relative difference of the two runs' mean losses over their first 20 steps (same
-# seed, same batches and noise, so they differ only by float rounding and kernel order).
-# Logs and train.csv files go to $OUT if set, else to a temporary folder that is printed.
-set -euo pipefail
+# It finds libtorch in the Python's site-packages (torch/lib and the nvidia/*/lib folders of the
+# CUDA wheels) and puts it on LD_LIBRARY_PATH, since the rpath baked in at build time points at
+# the build machine's copy. Then, each step bounded by `timeout`:
+#   1. a dataset made by the binary itself (seed 0: the first 400 training and 20 validation
+#      trajectories of `phi dataset generate --split all`);
+#   2. correctness: 20 steps of `phi train --backend tch` at the thesis scale
+#      (configs/gns/1sn.toml, batch 2) on `--device cpu` and on `--device cuda`, losses per step;
+#   3. speed: 300 steps of the same on CUDA beside the PyTorch reference trainer
+#      (benches/anchors/gns/train_reference.py) on the same GPU, configuration and batch, and
+#      inference: `phi rollout --device cuda` beside the reference's one-step predictions;
+#   4. the thesis-size runs of configs/gns/gpu/*.toml side by side on the GPU until BUDGET seconds
+#      (from the start of this script) less two minutes, stopped by SIGINT (a checkpoint each);
+#   5. each run's last checkpoint screened on the GPU by the reference implementation (the same
+#      network as phi's, to 3e-8: phi-gns/tests/model/pytorch.rs) on 20 validation trajectories.
+# Everything it measures goes to $OUT (or a temporary folder): gpu-check.log, small.tar (CSV and
+# JSON files), and per run run-NAME.tar (model, state, train.csv) plus the optimiser state of the
+# first run (resumable there with `phi train --resume`).
+set -uo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
 phi="$(realpath "${1:-target/release/phi}")"
 python="${PYTHON:-python3}"
+budget="${BUDGET:-560}"
+runs="${RUNS:-1sn 1s 1sn-b8}"
 out="${OUT:-$(mktemp -d)}"
 mkdir -p "$out"
 work="$(mktemp -d)"
-trap 'rm -rf "$work"' EXIT
+small="$work/small"
+mkdir -p "$small"
 exec > >(tee "$out/gpu-check.log") 2>&1
 
 torch_dir="$("$python" -W ignore -c 'import torch, os; print(os.path.dirname(torch.__file__))')"
@@ -46,53 +55,105 @@ export LD_LIBRARY_PATH="$libs${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 echo "== torch"
 "$python" -W ignore -c 'import torch; print("torch", torch.__version__, "| CUDA", torch.version.cuda,
       "| cuda available:", torch.cuda.is_available(), "| devices:", torch.cuda.device_count())'
-version="$("$python" -W ignore -c 'import torch; print(torch.__version__.split("+")[0])')"
-case "$version" in
-    2.11.*) ;;
-    *) echo "warning: phi binds libtorch 2.11 (tch 0.24), this Python has torch $version" ;;
-esac
 command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,memory.total,driver_version \
     --format=csv,noheader
-ldd --version | head -n 1
-
+nproc
 echo "== $phi"
 ls -l "$phi"
-# Every library the binary loads must resolve, libtorch_cuda.so among them.
-if ldd "$phi" | grep -E 'not found|version .* not found'; then
+if ldd "$phi" | grep -E 'not found'; then
     echo "error: $phi has unresolved libraries (above)"
     exit 1
 fi
-ldd "$phi" | grep -E 'libtorch|libc10|libcudart'
+ldd "$phi" | grep -E 'libtorch|libc10' | sed 's/ (0x.*//'
 
-echo "== dataset (6 train, 1 valid)"
-timeout 90 "$phi" dataset generate --out "$work/data" --split train --count 6 --seed 0
-timeout 30 "$phi" dataset generate --out "$work/data" --split valid --count 1 --seed 0
+echo "== dataset (400 train, 20 valid) [${SECONDS}s]"
+data="$work/data"
+timeout 150 "$phi" -q dataset generate --out "$data" --split train --count 400 --seed 0 || exit 1
+timeout 60 "$phi" -q dataset generate --out "$data" --split valid --count 20 --seed 0 || exit 1
+cp "$data/metadata.json" "$small/metadata.json"
 
-train() { # device, steps, log_every, timeout
-    local run="$work/run-$1"
-    timeout "$4" "$phi" train --backend tch --device "$1" --data "$work/data" \
-        --config configs/gns/1sn.toml --out "$run" --steps "$2" --log-every "$3" \
-        --screen-every 0 --checkpoint-every "$2"
-    cp "$run/train.csv" "$out/train-$1.csv"
+train() { # name, device, steps, log_every, timeout, config
+    timeout "$5" "$phi" -q train --backend tch --device "$2" --data "$data" --config "$6" \
+        --out "$work/run-$1" --steps "$3" --log-every "$4" --screen-every 0 --checkpoint-every "$3"
+    local rc=$?
+    cp "$work/run-$1/train.csv" "$small/train-$1.csv" 2>/dev/null
+    return $rc
 }
 
-echo "== cpu: 20 steps at the thesis scale"
-train cpu 20 10 150
-echo "== cuda: 300 steps at the thesis scale"
-train cuda 300 10 210
-
-# train.csv: step,loss,learning_rate,steps_per_second,...
+echo "== correctness: 20 steps at the thesis scale, cpu and cuda [${SECONDS}s]"
+train check-cpu cpu 20 1 150 configs/gns/1sn.toml
+train check-cuda cuda 20 1 90 configs/gns/1sn.toml
 awk -F, '
     FNR == 1 { next }
-    FILENAME ~ /cpu/ { cpu_rate = $4; if ($1 <= 20) cpu_loss[$1] = $2 }
-    FILENAME ~ /cuda/ { cuda_rate = $4; if ($1 <= 20) cuda_loss[$1] = $2 }
+    FILENAME ~ /check-cpu/ { cpu[$1] = $2 }
+    FILENAME ~ /check-cuda/ { gpu[$1] = $2 }
     END {
-        printf "steps/s: cpu %.2f, cuda %.2f, ratio %.1f\n", cpu_rate, cuda_rate, cuda_rate / cpu_rate
-        for (s = 10; s <= 20; s += 10) {
-            d = cuda_loss[s] - cpu_loss[s]
-            if (d < 0) d = -d
-            printf "mean loss of steps %d-%d: cpu %.6e, cuda %.6e, relative difference %.1e\n",
-                s - 9, s, cpu_loss[s], cuda_loss[s], d / cpu_loss[s]
+        worst = 0
+        for (s = 1; s <= 20; s++) {
+            if (!(s in cpu) || !(s in gpu)) { print "step " s ": missing"; continue }
+            d = gpu[s] - cpu[s]; if (d < 0) d = -d
+            r = d / cpu[s]; if (r > worst) worst = r
+            printf "step %2d: loss cpu %.7e, cuda %.7e, relative difference %.1e\n", s, cpu[s], gpu[s], r
         }
-    }' "$out/train-cpu.csv" "$out/train-cuda.csv"
-echo "logs in $out"
+        printf "largest relative difference over 20 steps: %.1e\n", worst
+    }' "$small/train-check-cpu.csv" "$small/train-check-cuda.csv"
+
+echo "== speed: phi train, 300 steps on cuda [${SECONDS}s]"
+train speed-cuda cuda 300 100 120 configs/gns/1sn.toml
+tail -n 3 "$small/train-speed-cuda.csv"
+echo "== speed: reference trainer, 300 steps on cuda [${SECONDS}s]"
+PYTHONUNBUFFERED=1 timeout 120 "$python" benches/anchors/gns/train_reference.py --data "$data" \
+    --config configs/gns/1sn.toml --steps 300 --log-every 100 --device cuda --out "$work/ref-speed" \
+    && cp "$work/ref-speed/train.csv" "$small/train-ref-speed.csv"
+echo "== inference: reference, 300 one-step predictions on cuda [${SECONDS}s]"
+PYTHONUNBUFFERED=1 timeout 60 "$python" benches/anchors/gns/train_reference.py --data "$data" \
+    --config configs/gns/1sn.toml --device cuda --bench-inference 300 \
+    --init-from "$work/run-speed-cuda/checkpoints/step-0000000300"
+echo "== inference: phi rollout, 300 steps on cuda [${SECONDS}s]"
+timeout 90 "$phi" -q rollout --backend tch --device cuda --data "$data" --split valid --index 0 \
+    --model "$work/run-speed-cuda/checkpoints/step-0000000300" --steps 300 --frame-every 0 \
+    --out "$work/rollout-cuda" && cp "$work/rollout-cuda"/*/rollout.json "$small/rollout-cuda.json"
+grep -E '"(wall|model)_seconds"' "$small/rollout-cuda.json"
+
+long=$((budget - SECONDS - 170))
+echo "== thesis-size runs side by side ($runs) for ${long}s [${SECONDS}s]"
+if [ "$long" -gt 30 ]; then
+    # `wait` with the PIDs: a bare `wait` would also wait for the `tee` of the log, for ever.
+    pids=()
+    for name in $runs; do
+        timeout -s INT -k 60 "$long" "$phi" -q train --backend tch --device cuda --data "$data" \
+            --config "configs/gns/gpu/$name.toml" --out "$work/gpu-$name" \
+            > "$work/gpu-$name.log" 2>&1 &
+        pids+=($!)
+    done
+    wait "${pids[@]}"
+    for name in $runs; do
+        tail -n 2 "$work/gpu-$name.log"
+        tail -n 1 "$work/gpu-$name/train.csv"
+    done
+fi
+
+echo "== screening the last checkpoints on 20 validation trajectories, side by side [${SECONDS}s]"
+pids=()
+for name in $runs; do
+    last="$(ls -d "$work/gpu-$name"/checkpoints/step-* 2>/dev/null | tail -n 1)"
+    [ -n "$last" ] || continue
+    PYTHONUNBUFFERED=1 timeout 150 "$python" -W ignore benches/anchors/gns/train_reference.py \
+        --data "$data" --config "configs/gns/gpu/$name.toml" --device cuda --init-from "$last" \
+        --screen-only 20 > "$work/screen-$name.log" 2>&1 &
+    pids+=($!)
+done
+wait "${pids[@]}"
+for name in $runs; do
+    last="$(ls -d "$work/gpu-$name"/checkpoints/step-* 2>/dev/null | tail -n 1)"
+    [ -n "$last" ] || continue
+    echo "-- $name, $(basename "$last"): $(tail -n 1 "$work/screen-$name.log")"
+    cp "$work/screen-$name.log" "$small/"
+    tar -cf "$out/run-$name.tar" -C "$work/gpu-$name" train.csv config.toml \
+        -C "$last" model.json model.safetensors state.json
+    if [ "$name" = "${runs%% *}" ]; then
+        cp "$last/optimizer.safetensors" "$out/optimizer-$name.safetensors"
+    fi
+done
+tar -cf "$out/small.tar" -C "$small" .
+echo "done in ${SECONDS}s; files in $out"
