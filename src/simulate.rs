@@ -338,8 +338,17 @@ pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> 
     }
 }
 
-/// The names `phi simulate` writes in its output directory.
-const RUN_FILES: [&str; 3] = ["run.json", "trajectory.npz", "simulation.gif"];
+/// The names of the files `phi simulate` writes in its output directory.
+const RUN_FILES: [&str; 4] = [
+    "run.json",
+    "trajectory.npz",
+    "simulation.gif",
+    "simulation.pvd",
+];
+
+/// The directories `phi simulate` writes in its output directory, each with the extension of
+/// its `frame_NNNNN` files: PNG frames and the VTK series.
+const RUN_DIRS: [(&str, &str); 2] = [("frames", ".png"), ("vtk", ".vtu")];
 
 /// Whether `name` is one of the files `phi simulate` writes (temporary files of atomic writes
 /// included).
@@ -382,16 +391,31 @@ pub fn prepare_out_dir(out: &Path, force: bool) -> Result<()> {
             out.display()
         );
     }
-    let frames_dir = out.join("frames");
-    let frames_are_ours = !frames_dir.exists()
-        || (frames_dir.is_dir()
-            && list(&frames_dir)?.iter().all(|n| {
-                (n.starts_with("frame_") && n.ends_with(".png")) || n.starts_with(".frame_")
-            }));
-    let foreign: Vec<&String> = names
-        .iter()
-        .filter(|n| !(is_run_file(n) || (n.as_str() == "frames" && frames_are_ours)))
-        .collect();
+    // A frame directory is ours when it holds only frames (and temporary files of their atomic
+    // writes); anything else is foreign, named with its path inside `out`.
+    let mut our_dirs = Vec::new();
+    let mut foreign: Vec<String> = Vec::new();
+    for name in &names {
+        if is_run_file(name) {
+            continue;
+        }
+        let Some((dir_name, extension)) = RUN_DIRS.iter().find(|(d, _)| d == name) else {
+            foreign.push(name.clone());
+            continue;
+        };
+        let dir = out.join(dir_name);
+        if !dir.is_dir() {
+            foreign.push(name.clone());
+            continue;
+        }
+        let inside = list(&dir)?;
+        match inside.iter().find(|n| {
+            !((n.starts_with("frame_") && n.ends_with(extension)) || n.starts_with(".frame_"))
+        }) {
+            Some(other) => foreign.push(format!("{dir_name}/{other}")),
+            None => our_dirs.push(*dir_name),
+        }
+    }
     let previous_run = names.iter().any(|n| n == "run.json");
     if !force {
         bail!(
@@ -413,9 +437,10 @@ pub fn prepare_out_dir(out: &Path, force: bool) -> Result<()> {
             out.display()
         );
     }
-    if frames_dir.exists() {
-        std::fs::remove_dir_all(&frames_dir)
-            .with_context(|| format!("removing the previous run's {}", frames_dir.display()))?;
+    for dir_name in our_dirs {
+        let dir = out.join(dir_name);
+        std::fs::remove_dir_all(&dir)
+            .with_context(|| format!("removing the previous run's {}", dir.display()))?;
     }
     for name in names.iter().filter(|n| is_run_file(n)) {
         let path = out.join(name);

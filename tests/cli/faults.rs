@@ -191,6 +191,58 @@ fn simulate_does_not_overwrite_silently() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+/// A run with a VTK series (`simulation.pvd`, `vtk/`) is replaced whole by `--force`: no VTK frame
+/// of the old run remains. A file `phi simulate` does not write, beside the series or inside
+/// `vtk/`, is refused even with `--force`, and left as it was.
+#[test]
+fn force_replaces_a_run_with_a_vtk_series() {
+    let dir = scratch("overwrite-vtk");
+    let scene = falling_block(&dir, "");
+    let simulate = |out: &std::path::Path, steps: &str, force: bool| {
+        let mut c = phi();
+        c.arg("simulate").arg(&scene).arg("--out").arg(out).args([
+            "--steps",
+            steps,
+            "--vtk-every",
+            "2",
+        ]);
+        if force {
+            c.arg("--force");
+        }
+        c.output().unwrap()
+    };
+    let out = dir.join("run");
+    ok(simulate(&out, "4", false));
+    assert!(out.join("simulation.pvd").is_file());
+    assert!(out.join("vtk/frame_00004.vtu").is_file());
+    ok(simulate(&out, "2", true));
+    assert_eq!(run_json(&out)["steps"], 2);
+    assert!(out.join("vtk/frame_00002.vtu").is_file());
+    assert!(
+        !out.join("vtk/frame_00004.vtu").exists(),
+        "a VTK frame of the old run is left"
+    );
+    let pvd = std::fs::read_to_string(out.join("simulation.pvd")).unwrap();
+    assert!(!pvd.contains("frame_00004"), "{pvd}");
+
+    for foreign in ["notes.txt", "vtk/notes.txt"] {
+        let other = dir.join(format!("other-{}", foreign.replace('/', "-")));
+        ok(simulate(&other, "2", false));
+        let path = other.join(foreign);
+        std::fs::write(&path, "mine").unwrap();
+        let output = simulate(&other, "2", true);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(!output.status.success(), "{foreign} was overwritten");
+        assert!(
+            stderr.contains("does not write") && stderr.contains(foreign),
+            "{stderr}"
+        );
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "mine");
+        assert!(other.join("vtk/frame_00002.vtu").is_file());
+    }
+    let _ = std::fs::remove_dir_all(dir);
+}
+
 /// Requests beyond the memory limit are refused before anything is allocated or written,
 /// naming the key, the estimate and the limit.
 #[test]
