@@ -21,3 +21,8 @@ pub use phi_core::{AutodiffBackend, Backend, IntTensor, Tensor, TensorError};
 pub use phi_flip;
 pub use phi_geom;
 pub use phi_gns;
+
+/// The code of `README.md`, compiled and run as doc tests, so the README's example stays true.
+#[cfg(all(doctest, feature = "ndarray"))]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeExamples;
