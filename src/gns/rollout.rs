@@ -104,9 +104,9 @@ pub struct RolloutArgs {
     /// Pixels per grid cell in the GIF.
     #[arg(long, default_value_t = 6)]
     pub pixels_per_cell: u32,
-    /// Print the MSE of every frame (default: the first, quartile and last steps).
+    /// Print the MSE of every step (default: the first, quartile and last steps).
     #[arg(long)]
-    pub verbose: bool,
+    pub mse_every_step: bool,
     /// Write the prediction and the truth as VTK frames every this many steps, for ParaView:
     /// `rollout.pvd` and `truth.pvd`, frames in `vtk/` (0: none).
     #[arg(long, default_value_t = 0)]
@@ -388,7 +388,7 @@ fn roll_all<B: GnsKernels>(plan: &Plan, args: &RolloutArgs) -> Result<Vec<Rollou
     let mut records = Vec::with_capacity(plan.indices.len());
     for (&index, dir) in plan.indices.iter().zip(&plan.dirs) {
         let record = roll_one::<B>(&model, plan, args, index, dir, &device)?;
-        print!("{}", format_record(&record, dir, args.verbose));
+        print!("{}", format_record(&record, dir, args.mse_every_step));
         std::io::stdout().flush().ok();
         records.push(record);
     }
@@ -701,10 +701,10 @@ fn write_record(dir: &Path, record: &RolloutRecord) -> Result<()> {
     Ok(())
 }
 
-/// The steps whose MSE the summary prints: every step with `verbose` or at most 6 steps, else
+/// The steps whose MSE the summary prints: every step with `every_step` or at most 6 steps, else
 /// the first, the quartiles and the last.
-pub fn printed_steps(steps: usize, verbose: bool) -> Vec<usize> {
-    if verbose || steps <= 6 {
+pub fn printed_steps(steps: usize, every_step: bool) -> Vec<usize> {
+    if every_step || steps <= 6 {
         return (1..=steps).collect();
     }
     let mut shown = vec![1, steps / 4, steps / 2, 3 * steps / 4, steps];
@@ -713,7 +713,7 @@ pub fn printed_steps(steps: usize, verbose: bool) -> Vec<usize> {
 }
 
 /// The summary `phi rollout` prints for one trajectory: what ran, the MSE table, what it wrote.
-pub fn format_record(record: &RolloutRecord, dir: &Path, verbose: bool) -> String {
+pub fn format_record(record: &RolloutRecord, dir: &Path, every_step: bool) -> String {
     let mut text = format!(
         "{}: {} of {} steps from frame {} (window {}..={}) on {}, {} particles ({} kinematic), \
          {:.2} s ({:.2} ms/step in the model)\n",
@@ -731,7 +731,7 @@ pub fn format_record(record: &RolloutRecord, dir: &Path, verbose: bool) -> Strin
     );
     if !record.mse.is_empty() {
         text.push_str("   step  frame  position MSE (stored units², non-kinematic particles)\n");
-        for step in printed_steps(record.mse.len(), verbose) {
+        for step in printed_steps(record.mse.len(), every_step) {
             text.push_str(&format!(
                 "  {step:>5}  {:>5}  {:.6e}\n",
                 record.start + step,

@@ -353,12 +353,13 @@ fn rollout_writes_predictions_truth_mse_and_gif() {
     assert_eq!(&gif[..6], b"GIF89a");
     assert_eq!(gif.last(), Some(&0x3B));
 
-    // Its own outputs are rewritten; --verbose prints every step.
+    // Its own outputs are rewritten; --mse-every-step prints every step, and -v is the global
+    // flag (backtraces), which rollout accepts like every command.
     let stdout = ok(rollout(
         &model,
         &data,
         &out,
-        &["--index", "1", "--steps", "8", "--verbose"],
+        &["--index", "1", "--steps", "8", "--mse-every-step", "-v"],
     ));
     for e in &expected {
         assert!(stdout.contains(&format!("{e:.6e}")), "{stdout}");
