@@ -186,7 +186,6 @@ impl<B: Backend> Adam<B> {
                 ),
             });
         }
-        let mut squared_norm = 0.0f64;
         for ((name, p), g) in params.iter().zip(gradients) {
             if g.shape() != p.shape() {
                 return Err(ModelError::Input {
@@ -198,18 +197,8 @@ impl<B: Backend> Adam<B> {
                     ),
                 });
             }
-            let values = g.host_values();
-            if !values.iter().all(|x| x.is_finite()) {
-                return Err(ModelError::NonFinite {
-                    what: "gradients",
-                    reason: format!("'{name}': a non-finite gradient"),
-                });
-            }
-            squared_norm += values
-                .iter()
-                .map(|&x| f64::from(x) * f64::from(x))
-                .sum::<f64>();
         }
+        let squared_norm = squared_norm(params, gradients)?;
         let c = self.config;
         let scale = clip_scale(c.clip_norm, squared_norm.sqrt());
         let t = self.step + 1;
@@ -253,6 +242,43 @@ impl<B: Backend> Adam<B> {
         self.step = t;
         Ok(updated)
     }
+}
+
+/// The squared global norm of `gradients` in f64, with one read from their device: each
+/// gradient's sum of squares is taken where it lives and the sums come back together. A sum that
+/// is not finite means a non-finite gradient or squares beyond f32's range; only then are that
+/// gradient's values read, to tell the two apart and to sum them in f64.
+///
+/// # Errors
+/// [`ModelError::NonFinite`] naming the first parameter whose gradient is not finite.
+fn squared_norm<B: Backend>(
+    params: &Parameters<B>,
+    gradients: &[Tensor<B>],
+) -> Result<f64, ModelError> {
+    if gradients.is_empty() {
+        return Ok(0.0);
+    }
+    let sums: Vec<Tensor<B>> = gradients.iter().map(|g| g.square().sum()).collect();
+    let sums = Tensor::concat(&sums, 0)?.to_vec();
+    let mut total = 0.0f64;
+    for (((name, _), g), sum) in params.iter().zip(gradients).zip(sums) {
+        if sum.is_finite() {
+            total += f64::from(sum);
+            continue;
+        }
+        let values = g.host_values();
+        if !values.iter().all(|x| x.is_finite()) {
+            return Err(ModelError::NonFinite {
+                what: "gradients",
+                reason: format!("'{name}': a non-finite gradient"),
+            });
+        }
+        total += values
+            .iter()
+            .map(|&x| f64::from(x) * f64::from(x))
+            .sum::<f64>();
+    }
+    Ok(total)
 }
 
 /// The factor that brings gradients of global norm `norm` down to `clip` (1 when they are within

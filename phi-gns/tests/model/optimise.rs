@@ -89,9 +89,46 @@ fn adam_matches_the_host_update<B: GnsKernels>() {
     bad[0] = Tensor::full(&bad[0].shape(), f32::NAN, &device);
     let before = host_params(adam.moments().0);
     let error = adam.update(&current, &bad).unwrap_err().to_string();
-    assert!(error.contains("non-finite"), "{error}");
+    let first = current.iter().next().unwrap().0.to_string();
+    assert!(
+        error.contains("non-finite") && error.contains(&format!("'{first}'")),
+        "{error}"
+    );
     assert_eq!(adam.step(), 3);
     assert_eq!(host_params(adam.moments().0), before);
+    // An infinity in the last parameter's gradient is refused and names that parameter.
+    let mut bad: Vec<Tensor<B>> = current.iter().map(|(_, t)| t.zeros_like()).collect();
+    let last = bad.len() - 1;
+    bad[last] = Tensor::full(&bad[last].shape(), f32::INFINITY, &device);
+    let error = adam.update(&current, &bad).unwrap_err().to_string();
+    let name = current.iter().last().unwrap().0.to_string();
+    assert!(error.contains(&format!("'{name}'")), "{error}");
+    assert_eq!(adam.step(), 3);
+    // Finite gradients whose squares overflow f32 are not refused: the norm is summed in f64,
+    // and clipping brings them to norm 1, so Adam's first step moves each weight by ~lr.
+    let clipped = AdamConfig {
+        clip_norm: Some(1.0),
+        ..config
+    };
+    let mut adam = Adam::new(clipped, &current);
+    let huge: Vec<Tensor<B>> = current
+        .iter()
+        .map(|(_, t)| Tensor::full(&t.shape(), 1e20, &device))
+        .collect();
+    let updated = adam.update(&current, &huge).unwrap();
+    for ((name, after), before) in host_params(&updated)
+        .iter()
+        .zip(host_params(&current).values())
+    {
+        for (a, b) in after.iter().zip(before) {
+            let moved = b - a;
+            assert!(
+                (moved - 1e-2).abs() < 1e-4,
+                "{}: '{name}' moved by {moved}, not the learning rate 1e-2",
+                B::name()
+            );
+        }
+    }
 }
 
 /// A batch of windows of liquid over obstacles, one per seed, with random-walk noise of
