@@ -457,12 +457,33 @@ impl<B: GnsKernels> Gns<B> {
     }
 
     /// The same model with other parameters of the same layout (trainable leaves, an
-    /// optimiser's update).
+    /// optimiser's update). The spec was validated and the normalisers made when `self` was:
+    /// only the parameters' names and shapes are checked (on the host), and the normalisers are
+    /// made again only when the parameters live on another device. A training step calls this
+    /// twice or more, so it must not re-upload what has not changed.
     ///
     /// # Errors
-    /// As [`Gns::new`].
+    /// [`ModelError::MissingWeight`], [`ModelError::UnexpectedWeight`] or
+    /// [`ModelError::WeightShape`] when `params` do not fit the spec.
     pub fn with_params(&self, params: Parameters<B>) -> Result<Self, ModelError> {
-        Self::new(self.spec.clone(), params)
+        let named = params
+            .iter()
+            .map(|(n, t)| (n.to_string(), t.clone()))
+            .collect();
+        let params =
+            Parameters::from_tensors(&self.spec.config, named, &PathBuf::from(WEIGHTS_FILE))?;
+        let device = params.iter().next().map(|(_, t)| t.device());
+        let normalisers = match device {
+            Some(device) if device != self.normalisers.vel_mean.device() => {
+                Normalisers::new(&self.spec, &device)?
+            }
+            _ => self.normalisers.clone(),
+        };
+        Ok(Gns {
+            spec: self.spec.clone(),
+            params,
+            normalisers,
+        })
     }
 
     /// The same model measuring its boundary features against other walls: `bounds` `[lower,
