@@ -96,6 +96,15 @@ pub struct TrainingSection {
     /// `δ` of the Huber loss in normalised units (only with `loss = "huber"`; default 1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub huber_delta: Option<f64>,
+    /// Mirror augmentation: each example of a batch is reflected across the vertical mid-plane
+    /// of the model's bounds (`x ↦ lower + upper − x` on the first axis; gravity is along
+    /// the last) with probability ½, which maps a scene to a scene (default off).
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub mirror: bool,
+}
+
+fn is_false(value: &bool) -> bool {
+    !*value
 }
 
 /// `training.loss`.
@@ -462,6 +471,23 @@ mod tests {
         );
         let e = refusal(&text.replace("log_every = 100", "log_every = 100\nloss = \"l1\""));
         assert!(e.contains("l1"), "{e}");
+    }
+
+    #[test]
+    fn mirror_augmentation_is_off_unless_asked_and_stored() {
+        let text = preset();
+        let plain = TrainConfig::from_toml(&text, "preset.toml").unwrap();
+        assert!(!plain.training.mirror);
+        assert!(
+            !plain.to_toml().contains("mirror"),
+            "the default is left unsaid"
+        );
+        let on = text.replace("log_every = 100", "log_every = 100\nmirror = true");
+        let c = TrainConfig::from_toml(&on, "preset.toml").unwrap();
+        assert!(c.training.mirror);
+        assert_eq!(TrainConfig::from_toml(&c.to_toml(), "stored").unwrap(), c);
+        let e = refusal(&text.replace("log_every = 100", "log_every = 100\nmirror = 1"));
+        assert!(e.contains("mirror"), "{e}");
     }
 
     #[test]

@@ -32,15 +32,18 @@ pub enum RngStream {
     Noise,
     /// The draws of pushforward training (how many steps to unroll, which examples).
     Pushforward,
+    /// Which examples of a batch are mirrored (`training.mirror`).
+    Mirror,
 }
 
 impl RngStream {
-    /// The purpose's identifier in the generator's key: 1, 2, 3.
+    /// The purpose's identifier in the generator's key: 1, 2, 3, 4.
     pub fn id(self) -> u64 {
         match self {
             RngStream::Sampling => 1,
             RngStream::Noise => 2,
             RngStream::Pushforward => 3,
+            RngStream::Mirror => 4,
         }
     }
 }

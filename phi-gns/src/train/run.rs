@@ -375,6 +375,14 @@ struct LossInputs<B: GnsKernels> {
     norm: ErrorNorm,
 }
 
+/// Reflects positions (`dim` components each, row-major) across the plane `x = about / 2` of
+/// the first axis: `x ↦ about − x`, with `about` the sum of the axis's lower and upper bounds.
+fn mirror_first_axis(positions: &mut [f32], dim: usize, about: f32) {
+    for x in positions.iter_mut().step_by(dim) {
+        *x = about - *x;
+    }
+}
+
 impl<B: GnsKernels> LossInputs<B> {
     /// The windows of `batch` with the step's noise, the targets and the mask. With `unrolls`
     /// pushforward steps, the start window ends `unrolls` frames before the latest input frame
@@ -392,6 +400,9 @@ impl<B: GnsKernels> LossInputs<B> {
         let sigma = config.model.noise_std;
         let kinematic_types = &model.spec().kinematic_types;
         let mut noise_rng = step_rng(config.training.seed, batch.step, RngStream::Noise);
+        let mut mirror_rng = step_rng(config.training.seed, batch.step, RngStream::Mirror);
+        let axis = model.spec().bounds[0];
+        let mirror_about = (axis[0] + axis[1]) as f32;
         let mut windows = Vec::with_capacity(batch.examples.len());
         let (mut next, mut truth, mut types) = (Vec::new(), Vec::new(), Vec::new());
         let truth_frames = if unrolls > 0 {
@@ -418,15 +429,24 @@ impl<B: GnsKernels> LossInputs<B> {
                 .iter()
                 .map(|t| kinematic_types.contains(t))
                 .collect();
-            let target = example
+            let mut target = example
                 .positions_at(start + 1)
-                .expect("the sampler's window spans it");
+                .expect("the sampler's window spans it")
+                .to_vec();
+            // A stream of its own: turning mirroring on leaves the windows and the noise as
+            // they were, and only reflects the examples whose draw is odd.
+            let mirrored =
+                config.training.mirror && rand::RngCore::next_u64(&mut mirror_rng) & 1 == 1;
+            if mirrored {
+                mirror_first_axis(&mut window, dim, mirror_about);
+                mirror_first_axis(&mut target, dim, mirror_about);
+            }
             if sigma > 0.0 {
                 let noise = random_walk_noise(&kinematic, c + 1, dim, sigma, &mut noise_rng);
                 window = noise.apply(&window);
-                next.extend(noise.adjust_target(target));
+                next.extend(noise.adjust_target(&target));
             } else {
-                next.extend_from_slice(target);
+                next.extend_from_slice(&target);
             }
             if truth_frames > 0 {
                 let first = if unrolls > 0 { start } else { example.frame };
@@ -439,6 +459,9 @@ impl<B: GnsKernels> LossInputs<B> {
                     .collect();
                 let mut block = vec![0.0f32; count * truth_frames * dim];
                 crate::rollout::fill_window(&rows, count, dim, &mut block);
+                if mirrored {
+                    mirror_first_axis(&mut block, dim, mirror_about);
+                }
                 truth.extend(block);
             }
             windows.push(window);
@@ -679,4 +702,26 @@ fn truncate_log(path: &Path, step: u64) -> Result<(), TrainError> {
     }
     phi_io::write_atomic(path, |w| phi_io::write_all(w, kept.as_bytes(), path))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::mirror_first_axis;
+
+    #[test]
+    fn mirroring_reflects_the_first_axis_only_and_undoes_itself() {
+        // Three 2D positions in [0.1, 0.9]²: about = 1.0.
+        let original = vec![0.1f32, 0.2, 0.5, 0.7, 0.85, 0.3];
+        let mut p = original.clone();
+        mirror_first_axis(&mut p, 2, 1.0);
+        assert_eq!(p, vec![0.9, 0.2, 0.5, 0.7, 1.0 - 0.85, 0.3]);
+        mirror_first_axis(&mut p, 2, 1.0);
+        for (a, b) in p.iter().zip(&original) {
+            assert!((a - b).abs() <= 1e-7, "{a} vs {b}");
+        }
+        // 3D: x only, y (gravity's axis in 2D) and z untouched.
+        let mut q = vec![0.2f32, 0.3, 0.4];
+        mirror_first_axis(&mut q, 3, 1.0);
+        assert_eq!(q, vec![0.8, 0.3, 0.4]);
+    }
 }
