@@ -45,6 +45,23 @@ macro_rules! backend_kind {
 
 phi_core::backend_list!(backend_kind!());
 
+/// The default backends, one rule for every command (stated in `phi --help` and the README).
+impl BackendKind {
+    /// The default of the commands that run without gradients (`simulate`, `rollout`, `eval`):
+    /// the first backend compiled in, ndarray (every build has it: phi-flip requires it).
+    pub fn default_forward() -> BackendKind {
+        BackendKind::available()[0]
+    }
+
+    /// The default of the commands that need gradients (`train`, `optimize`): the first backend
+    /// compiled in that has autodiff, burn in the default build; `None` in a build without one.
+    pub fn default_autodiff() -> Option<BackendKind> {
+        BackendKind::available()
+            .into_iter()
+            .find(|kind| kind.has_autodiff())
+    }
+}
+
 impl fmt::Display for BackendKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.name())
@@ -146,6 +163,19 @@ mod tests {
     fn every_kind_dispatches_to_the_backend_of_its_name() {
         let kinds = BackendKind::available();
         assert_eq!(kinds[0].name(), "ndarray", "the default comes first");
+        assert_eq!(BackendKind::default_forward(), kinds[0]);
+        let autodiff_default = BackendKind::default_autodiff().unwrap();
+        assert!(autodiff_default.has_autodiff());
+        assert!(
+            kinds
+                .iter()
+                .take_while(|k| **k != autodiff_default)
+                .all(|k| !k.has_autodiff()),
+            "{autodiff_default} is not the first with autodiff"
+        );
+        if cfg!(feature = "burn") {
+            assert_eq!(autodiff_default.name(), "burn");
+        }
         for kind in kinds {
             assert_eq!(crate::with_backend!(kind, B => B::name()), kind.name());
             let autodiff =

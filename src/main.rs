@@ -17,6 +17,14 @@ use phi::{with_autodiff_backend, with_backend};
     name = "phi",
     version,
     about = "Differentiable liquid simulation and learned simulators",
+    long_about = "Differentiable liquid simulation and learned simulators.\n\n\
+                  Default backend: a command runs on ndarray, the first backend compiled in, \
+                  unless --backend names another; the commands that need gradients (train, \
+                  optimize) run on burn, the first compiled in with autodiff; simulate takes a \
+                  scene's [run] backend before either, and demo runs on all. `phi backends` \
+                  lists the backends of this build in that order. Devices: every command runs \
+                  on the CPU, except train and rollout with --device cuda on tch in a build with \
+                  CUDA, and the burn-wgpu backend, which runs on wgpu's default device (a GPU).",
     after_help = "Logging goes to stderr at level info; set RUST_LOG to change it, e.g. \
                   RUST_LOG=warn (quieter), RUST_LOG=debug, or RUST_LOG=phi_gns=debug (one crate). \
                   Progress bars are drawn only when stderr is a terminal, and not with -q."
@@ -50,7 +58,8 @@ enum Command {
         /// The output directory.
         #[arg(long)]
         out: PathBuf,
-        /// The backend (default: the scene's `[run] backend`, else ndarray).
+        /// The backend [default: the scene's `[run] backend`, else ndarray, as for every command
+        /// without gradients].
         #[arg(long)]
         backend: Option<BackendKind>,
         /// The device; the CPU backends have only `cpu`.
@@ -231,7 +240,7 @@ fn run_simulate(
         (None, Some(name)) => name
             .parse()
             .with_context(|| format!("{}: run.backend", options.scene.display()))?,
-        (None, None) => BackendKind::available()[0],
+        (None, None) => BackendKind::default_forward(),
     };
     if let Some(device) = device.as_deref().or(scene.run.device.as_deref())
         && device != "cpu"

@@ -42,7 +42,8 @@ pub struct OptimizeArgs {
     /// The output directory.
     #[arg(long)]
     pub out: PathBuf,
-    /// The backend: one with autodiff (default: the first compiled in).
+    /// The backend: one with autodiff [default: burn, else the first with autodiff compiled in,
+    /// as for every command that needs gradients].
     #[arg(long)]
     pub backend: Option<crate::backends::BackendKind>,
     /// Run this many iterations instead of the file's.
@@ -96,9 +97,7 @@ pub fn run(args: OptimizeArgs) -> Result<()> {
     let config = OptimizeConfig::from_file(&args.config)?;
     let kind = match args.backend {
         Some(kind) => kind,
-        None => *BackendKind::available()
-            .iter()
-            .find(|k| k.has_autodiff())
+        None => BackendKind::default_autodiff()
             .context("no backend with autodiff is compiled into this build")?,
     };
     crate::simulate::check_out_dir(&args.out)?;

@@ -85,7 +85,7 @@ pub struct RolloutArgs {
     /// Predicted frames [default: up to the trajectory's last frame].
     #[arg(long)]
     pub steps: Option<usize>,
-    /// The backend [default: ndarray].
+    /// The backend [default: ndarray, as for every command without gradients].
     #[arg(long)]
     pub backend: Option<BackendKind>,
     /// The device the model runs on: `cpu`, or `cuda` / `cuda:N` on the tch backend of a
@@ -344,7 +344,7 @@ pub fn check_rollout_dir(dir: &Path) -> Result<()> {
 /// rolled out, an error naming each one that stopped early and its step.
 pub fn run(args: RolloutArgs) -> Result<()> {
     let plan = plan(&args)?;
-    let kind = args.backend.unwrap_or(BackendKind::available()[0]);
+    let kind = args.backend.unwrap_or_else(BackendKind::default_forward);
     let records = crate::with_backend!(kind, B => roll_all::<B>(&plan, &args))?;
     let failed: Vec<String> = records
         .iter()

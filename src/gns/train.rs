@@ -31,9 +31,10 @@ pub struct TrainArgs {
     /// The training directory.
     #[arg(long)]
     pub out: PathBuf,
-    /// The backend; it must have autodiff.
-    #[arg(long, default_value = "burn")]
-    pub backend: BackendKind,
+    /// The backend: one with autodiff [default: burn, else the first with autodiff compiled in,
+    /// as for every command that needs gradients].
+    #[arg(long)]
+    pub backend: Option<BackendKind>,
     /// The device: cpu, or cuda / cuda:N on the tch backend of a `--features tch,cuda` build.
     #[arg(long, default_value = "cpu")]
     pub device: String,
@@ -145,7 +146,11 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let flag = Arc::clone(&stop);
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
         .context("cannot install the SIGINT/SIGTERM handler")?;
-    let kind = args.backend;
+    let kind = match args.backend {
+        Some(kind) => kind,
+        None => BackendKind::default_autodiff()
+            .context("no backend with autodiff is compiled into this build")?,
+    };
     crate::with_autodiff_backend!(kind, B => train::<B>(&options, &args.device, &stop),
         otherwise => bail!("the {kind} backend has no autodiff and cannot train; use --backend burn or tch"))
 }

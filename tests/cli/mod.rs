@@ -189,6 +189,40 @@ fn vtu_array(vtu: &str, name: &str) -> Vec<u8> {
     data.to_vec()
 }
 
+/// `phi --help` states the rule for the default backend once, and each command's help states
+/// the default the rule gives it.
+#[test]
+fn help_states_each_commands_default_backend() {
+    let help = |args: &[&str]| ok(phi().args(args).arg("--help").output().unwrap());
+    let top = help(&[]);
+    assert!(
+        top.contains("Default backend: a command runs on ndarray"),
+        "{top}"
+    );
+    let autodiff = phi::backends::BackendKind::default_autodiff().unwrap();
+    for (command, default) in [
+        ("simulate", "ndarray"),
+        ("rollout", "ndarray"),
+        ("eval", "ndarray"),
+        ("train", autodiff.name()),
+        ("optimize", autodiff.name()),
+    ] {
+        let text = help(&[command]);
+        // The option's description: the lines after its name, indented deeper than options.
+        let backend: String = text
+            .lines()
+            .skip_while(|line| !line.contains("--backend <BACKEND>"))
+            .skip(1)
+            .take_while(|line| line.starts_with("          "))
+            .collect();
+        assert!(
+            backend.contains(&format!("[default: {default}"))
+                || backend.contains(&format!("else {default}, as")),
+            "phi {command} --help: {backend}"
+        );
+    }
+}
+
 #[test]
 fn simulate_writes_a_vtk_series() {
     let dir = scratch("simulate-vtk");

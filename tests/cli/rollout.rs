@@ -315,6 +315,7 @@ fn rollout_writes_predictions_truth_mse_and_gif() {
     assert_eq!(record["complete"], true);
     assert_eq!(record["reason"], serde_json::Value::Null);
     assert_eq!(record["steps"], 8);
+    assert_eq!(record["backend"], "ndarray", "the default backend");
     assert_eq!(
         (record["start"].clone(), record["index"].clone()),
         (5.into(), 1.into())

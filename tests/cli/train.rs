@@ -151,6 +151,15 @@ fn a_run_writes_its_log_checkpoints_and_best_model() {
     let out = dir.join("run");
     let stdout = ok(train(&data, &preset, &out, &[]));
     assert!(stdout.contains("16 steps"), "{stdout}");
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("train.json")).unwrap()).unwrap();
+    assert_eq!(
+        record["backend"],
+        phi::backends::BackendKind::default_autodiff()
+            .unwrap()
+            .name(),
+        "the default backend"
+    );
     let rows = losses(&out);
     let steps: Vec<&str> = rows.iter().map(|r| r.0.as_str()).collect();
     assert_eq!(steps, ["2", "4", "6", "8", "10", "12", "14", "16"]);

@@ -101,7 +101,7 @@ pub struct EvalArgs {
     /// The output directory.
     #[arg(long)]
     pub out: PathBuf,
-    /// The backend [default: ndarray].
+    /// The backend [default: ndarray, as for every command without gradients].
     #[arg(long)]
     pub backend: Option<BackendKind>,
     /// Steps of the short rollouts of MSE 20.
@@ -597,7 +597,7 @@ pub fn check_eval_dir(out: &Path) -> Result<()> {
 /// As [`plan`]; a model that does not load; a cache entry of another model or options; I/O.
 pub fn run(args: EvalArgs) -> Result<()> {
     let plan = plan(&args)?;
-    let kind = args.backend.unwrap_or(BackendKind::available()[0]);
+    let kind = args.backend.unwrap_or_else(BackendKind::default_forward);
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let mut record = EvalRecord {
