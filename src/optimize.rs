@@ -291,10 +291,12 @@ pub fn optimize<B: AutodiffBackend + LatticeKernels + GnsKernels>(
     let started = Instant::now();
     let mut draw_error = None;
     let outcome = problem.run_through(forward, |record: &IterationRecord| {
-        eprintln!(
-            "iteration {:>3}: loss {:>12.4}  |∇| {:>10.4}  chamfer {:.3}",
-            record.iteration, record.loss, record.gradient_norm, record.chamfer
-        );
+        if !crate::progress::is_quiet() {
+            eprintln!(
+                "iteration {:>3}: loss {:>12.4}  |∇| {:>10.4}  chamfer {:.3}",
+                record.iteration, record.loss, record.gradient_norm, record.chamfer
+            );
+        }
         let k = record.iteration;
         if k == 0 || k == iterations || k.is_multiple_of(frame_every) {
             let name = |what: &str| frames.join(format!("iteration_{k:03}_{what}.png"));

@@ -1,5 +1,6 @@
 //! Progress bars: of step-by-step runs (`phi simulate`, `phi rollout`) and of work over
-//! trajectories (`phi dataset export`, `import`, `stats`).
+//! trajectories (`phi dataset generate`, `export`, `import`, `stats`, `phi eval`); and whether
+//! `phi -q` asked for no progress at all, bars or lines.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -13,9 +14,14 @@ pub fn set_quiet(quiet: bool) {
     QUIET.store(quiet, Ordering::Relaxed);
 }
 
+/// Whether `phi -q` asked for results and errors only: no bars, and no progress lines either.
+pub fn is_quiet() -> bool {
+    QUIET.load(Ordering::Relaxed)
+}
+
 /// Whether a bar that the caller would `show` is drawn.
 fn drawn(show: bool) -> bool {
-    show && !QUIET.load(Ordering::Relaxed)
+    show && !is_quiet()
 }
 
 /// A bar of `steps` steps on stderr, or a hidden one unless `show` (callers pass whether stderr
@@ -42,7 +48,7 @@ pub fn count_bar(len: usize, unit: &str, show: bool) -> ProgressBar {
     }
     let bar = ProgressBar::new(len as u64);
     let template = format!(
-        "{{spinner}} {{elapsed_precise}} [{{bar:40}}] {{pos}}/{{len}} {unit}, ETA {{eta}} {{msg}}"
+        "{{spinner}} {{elapsed_precise}} [{{bar:40}}] {{pos}}/{{len}} {unit}, {{per_sec}}, ETA {{eta}} {{msg}}"
     );
     bar.set_style(
         ProgressStyle::with_template(&template)
@@ -62,4 +68,22 @@ pub fn counter(unit: &str, show: bool) -> ProgressBar {
     let template = format!("{{spinner}} {{elapsed_precise}} {{pos}} {unit}, {{per_sec}} {{msg}}");
     bar.set_style(ProgressStyle::with_template(&template).expect("a valid template"));
     bar
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{drawn, is_quiet, set_quiet};
+
+    /// `-q` hides a bar that would be drawn; without it, `show` decides.
+    #[test]
+    fn quiet_hides_every_bar() {
+        set_quiet(true);
+        let quiet = (is_quiet(), drawn(true), drawn(false));
+        set_quiet(false);
+        assert_eq!(quiet, (true, false, false));
+        assert_eq!(
+            (is_quiet(), drawn(true), drawn(false)),
+            (false, true, false)
+        );
+    }
 }

@@ -14,7 +14,6 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use phi_flip::{RandomSceneParams, SceneVariant};
 use phi_gns::data::{
     LIQUID, OBSTACLE, Trajectory, TrajectoryStats, read_trajectory_and_stats, trajectory_file_name,
@@ -57,7 +56,7 @@ pub struct GenerateOptions {
     pub scenes: TestScenes,
     /// Stored units per cell (`None`: 0.8 / the longest side).
     pub position_scale: Option<f64>,
-    /// Show a progress bar.
+    /// Show a progress bar (never with `phi -q`).
     pub progress: bool,
 }
 
@@ -215,19 +214,7 @@ pub fn generate(options: &GenerateOptions) -> Result<GenerateSummary> {
         }
     }
 
-    let bar = if options.progress {
-        let bar = ProgressBar::new(jobs.len() as u64);
-        bar.set_style(
-            ProgressStyle::with_template(
-                "{elapsed_precise} [{bar:40}] {pos}/{len} trajectories, {per_sec}, ETA {eta}",
-            )
-            .expect("a valid template")
-            .progress_chars("=> "),
-        );
-        bar
-    } else {
-        ProgressBar::hidden()
-    };
+    let bar = crate::progress::count_bar(jobs.len(), "trajectories", options.progress);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(options.threads.unwrap_or(0))
         .build()

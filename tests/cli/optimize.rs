@@ -43,21 +43,37 @@ fn optimize_writes_loss_curve_plot_and_frames() {
     let config = dir.join("tiny.toml");
     std::fs::write(&config, CONFIG).unwrap();
     let out = dir.join("run");
-    let stdout = ok(phi()
-        .arg("optimize")
-        .arg(&config)
-        .arg("--out")
-        .arg(&out)
-        .args([
-            "--backend",
-            "burn",
-            "--iterations",
-            "4",
-            "--frame-every",
-            "2",
-        ])
-        .output()
-        .unwrap());
+    let optimize = |out: &std::path::Path, global: &[&str]| {
+        phi()
+            .args(global)
+            .arg("optimize")
+            .arg(&config)
+            .arg("--out")
+            .arg(out)
+            .args([
+                "--backend",
+                "burn",
+                "--iterations",
+                "4",
+                "--frame-every",
+                "2",
+            ])
+            .output()
+            .unwrap()
+    };
+    let output = optimize(&out, &[]);
+    // A line per iteration on stderr, none with -q.
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert!(stderr.contains("iteration   4: loss"), "{stderr}");
+    let stdout = ok(output);
+    let quiet = optimize(&dir.join("quiet"), &["-q"]);
+    let quiet_stderr = String::from_utf8_lossy(&quiet.stderr).into_owned();
+    assert!(!quiet_stderr.contains("iteration"), "{quiet_stderr}");
+    let quiet_stdout = ok(quiet);
+    assert!(
+        quiet_stdout.contains("5 iterations of 32 particles"),
+        "-q keeps the results: {quiet_stdout}"
+    );
     assert!(
         stdout.contains("5 iterations of 32 particles through flip on burn"),
         "{stdout}"

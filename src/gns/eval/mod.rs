@@ -710,11 +710,12 @@ fn evaluate_all<B: GnsKernels>(
             "adding the one-step errors in stored units to cached evaluations"
         );
     }
-    let bar = crate::progress::step_bar(
+    // One item per model and trajectory.
+    let bar = crate::progress::count_bar(
         todo.len(),
+        "trajectory evaluations",
         std::io::IsTerminal::is_terminal(&std::io::stderr()),
     );
-    bar.set_message("trajectories");
     let done = Mutex::new(Vec::with_capacity(todo.len()));
     todo.par_iter()
         .map(|(m, k, index, path, earlier)| -> Result<()> {
