@@ -119,7 +119,9 @@ pub enum TransferSpec {
     /// Tent weights, normalised (differentiable in the positions).
     #[default]
     Linear,
-    /// Nearest face, plain mean (Φ_Flow 2.1.4).
+    /// Nearest face, plain mean (Φ_Flow 2.1.4). A face reached by no particle, such as the
+    /// one above a partly filled surface cell, takes its neighbours' velocity before the
+    /// projection, as in Φ_Flow; the liquid then sloshes as with `linear`.
     Nearest,
 }
 

@@ -16,6 +16,8 @@ mod gradients;
 mod optimize;
 #[path = "flip/random.rs"]
 mod random;
+#[path = "flip/sloshing.rs"]
+mod sloshing;
 #[path = "flip/stability.rs"]
 mod stability;
 

@@ -59,19 +59,29 @@ impl<B: LatticeKernels> FlipSimulation<B> {
     /// at `positions` (host data `[N·d]`) and are not inside an obstacle, with the faces the
     /// obstacles block closed (carrying the obstacles' velocity when they move).
     ///
+    /// The velocity is first extrapolated one layer beyond the `valid` faces (the ones the
+    /// particles reached), as Φ_Flow does: a face of a liquid cell that no particle reached
+    /// takes the mean of its valid neighbours instead of gravity alone. With the nearest-face
+    /// transfer this is the free surface's face above a partly filled cell, and without the
+    /// extrapolation the projection would stop the liquid rising into it (a first-mode
+    /// sloshing tank then lost about half its amplitude per half cycle). With tent weights
+    /// every face of a liquid cell is valid and this changes nothing there.
+    ///
     /// # Errors
     /// [`FlipError::Solve`] (naming `step`) when the pressure solve fails.
     pub(super) fn make_incompressible(
         &self,
         velocity: &StaggeredGrid<B>,
+        valid: &StaggeredGrid<B>,
         positions: &[f32],
         masks: &ObstacleMasks<B>,
         step: usize,
     ) -> Result<Projection<B>> {
         let occupied = occupied_cells_from_host(positions, &self.domain, &self.device)?;
         let liquid = occupied.with_values(occupied.values() * &(1.0 - masks.solid.values()))?;
+        let (velocity, _) = extrapolate_valid(velocity, valid, 1)?;
         pressure_projection(
-            velocity,
+            &velocity,
             ProjectionMasks {
                 liquid: &liquid,
                 face_open: Some(&masks.face_open),
