@@ -95,12 +95,13 @@ fi
 
 if wants optimize; then
     # Thesis fig. 4.5's problem through FLIP and through the 1s and 2si models (Burn, CPU); a run
-    # with its summary.json is done.
+    # with its summary.json is done; one without it was cut short and is replaced.
     problem=scenes/optimize/two_spheres.toml
     optimize() {
         local out=$runs/optimize/$1
         shift
-        [ -f "$out/summary.json" ] || "$phi" optimize "$problem" --out "$out" --backend burn "$@"
+        [ -f "$out/summary.json" ] || "$phi" optimize "$problem" --out "$out" --backend burn \
+            --force "$@"
     }
     optimize flip
     optimize gns-1s --simulator gns --model "$runs/1s/best"

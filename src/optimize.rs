@@ -14,6 +14,10 @@
 //!   initial positions, final frames the target;
 //! - `summary.json`: the configuration, the loss and the distances before and after.
 //!
+//! The output directory must be new or empty; `--force` replaces a previous run (one holding
+//! only the files above; [`OPTIMIZE_OUTPUTS`]), whose files are removed first. Anything else is
+//! refused, `--force` or not.
+//!
 //! A run that stops early (non-finite loss or gradient, divergence, a failed step) writes all of
 //! the above for the iterations it completed, then returns the error.
 
@@ -32,6 +36,7 @@ use phi_plot::{LinePlot, Series};
 use serde::Serialize;
 
 use crate::gns::inverse::GnsForward;
+use crate::output::target::{OutputSubdir, Outputs, check_dir};
 use crate::output::{FrameStyle, KIND_LIQUID, OutputError, render_frame, write_atomic, write_png};
 
 /// `phi optimize CONFIG.toml --out DIR [--backend burn|tch] [--iterations N] [--loss L]`.
@@ -65,7 +70,23 @@ pub struct OptimizeArgs {
     /// The model directory of `--simulator gns` (a `phi train` directory's `best/`, say).
     #[arg(long, required_if_eq("simulator", "gns"))]
     pub model: Option<PathBuf>,
+    /// Replace a previous run in --out (a folder holding anything else is refused even then).
+    #[arg(long)]
+    pub force: bool,
 }
+
+/// What `phi optimize` writes in its output directory.
+pub const OPTIMIZE_OUTPUTS: Outputs = Outputs {
+    command: "phi optimize",
+    flag: "--out",
+    files: &["loss.csv", "loss.png", "summary.json"],
+    subdirs: &[OutputSubdir {
+        name: "frames",
+        prefix: "iteration_",
+        suffix: ".png",
+    }],
+    marker: None,
+};
 
 /// What simulates the optimised liquid.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
@@ -100,7 +121,8 @@ pub fn run(args: OptimizeArgs) -> Result<()> {
         None => BackendKind::default_autodiff()
             .context("no backend with autodiff is compiled into this build")?,
     };
-    crate::simulate::check_out_dir(&args.out)?;
+    // Refused before the configuration is built; a previous run is removed in `optimize`.
+    let _previous = check_dir(&args.out, &OPTIMIZE_OUTPUTS, args.force)?;
     let options = OptimizeOptions {
         config: args.config.clone(),
         out: args.out.clone(),
@@ -108,6 +130,7 @@ pub fn run(args: OptimizeArgs) -> Result<()> {
         loss: args.loss,
         frame_every: args.frame_every,
         pixels_per_cell: args.pixels_per_cell,
+        force: args.force,
         model: match args.simulator {
             Simulator::Flip => {
                 if args.model.is_some() {
@@ -183,6 +206,8 @@ pub struct OptimizeOptions {
     pub pixels_per_cell: u32,
     /// A GNS model directory to simulate with instead of FLIP.
     pub model: Option<PathBuf>,
+    /// Replace a previous run in `out` ([`OPTIMIZE_OUTPUTS`]).
+    pub force: bool,
 }
 
 /// What a run did.
@@ -255,6 +280,9 @@ pub fn optimize<B: AutodiffBackend + LatticeKernels + GnsKernels>(
         None => &problem,
     };
     let out = &options.out;
+    // Checked again here, once the configuration has been built: the previous run goes only
+    // when this one is about to write.
+    check_dir(out, &OPTIMIZE_OUTPUTS, options.force)?.remove()?;
     let frames = out.join("frames");
     std::fs::create_dir_all(&frames).with_context(|| format!("creating {}", frames.display()))?;
 

@@ -41,6 +41,7 @@ use phi_core::fields::LatticeKernels;
 use phi_flip::{Particles, Scene};
 use serde::Serialize;
 
+use crate::output::target::{OutputSubdir, Outputs, check_dir};
 use crate::output::vtk::{VtkFrame, VtkSeries};
 use crate::output::{
     ArrayData, FrameStyle, GifWriter, KIND_LIQUID, NpyArray, OutputError, render_frame,
@@ -338,116 +339,40 @@ pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> 
     }
 }
 
-/// The names of the files `phi simulate` writes in its output directory.
-const RUN_FILES: [&str; 4] = [
-    "run.json",
-    "trajectory.npz",
-    "simulation.gif",
-    "simulation.pvd",
-];
-
-/// The directories `phi simulate` writes in its output directory, each with the extension of
-/// its `frame_NNNNN` files: PNG frames and the VTK series.
-const RUN_DIRS: [(&str, &str); 2] = [("frames", ".png"), ("vtk", ".vtu")];
-
-/// Whether `name` is one of the files `phi simulate` writes (temporary files of atomic writes
-/// included).
-fn is_run_file(name: &str) -> bool {
-    RUN_FILES.contains(&name)
-        || RUN_FILES
-            .iter()
-            .any(|f| name.starts_with(&format!(".{f}.tmp-")))
-}
+/// What `phi simulate` writes in its output directory: the run's files, its PNG frames and its
+/// VTK series.
+pub const RUN_OUTPUTS: Outputs = Outputs {
+    command: "phi simulate",
+    flag: "--out",
+    files: &[
+        "run.json",
+        "trajectory.npz",
+        "simulation.gif",
+        "simulation.pvd",
+    ],
+    subdirs: &[
+        OutputSubdir {
+            name: "frames",
+            prefix: "frame_",
+            suffix: ".png",
+        },
+        OutputSubdir {
+            name: "vtk",
+            prefix: "frame_",
+            suffix: ".vtu",
+        },
+    ],
+    marker: None,
+};
 
 /// Makes sure `out` can take a run: missing or empty, or, with `force`, a previous run, whose
-/// files are removed.
+/// files are removed ([`crate::output::target::check_dir`]).
 ///
 /// # Errors
 /// A file where the directory should be; a non-empty directory without `force`; with `force`,
 /// one that holds anything `phi simulate` does not write (a dataset, other files).
 pub fn prepare_out_dir(out: &Path, force: bool) -> Result<()> {
-    check_out_dir(out)?;
-    if !out.exists() {
-        return Ok(());
-    }
-    let list = |dir: &Path| -> Result<Vec<String>> {
-        let mut names = Vec::new();
-        for entry in std::fs::read_dir(dir).with_context(|| format!("reading {}", dir.display()))? {
-            let entry = entry.with_context(|| format!("reading {}", dir.display()))?;
-            names.push(entry.file_name().to_string_lossy().into_owned());
-        }
-        names.sort();
-        Ok(names)
-    };
-    let names = list(out)?;
-    if names.is_empty() {
-        return Ok(());
-    }
-    let shown = names.iter().take(3).cloned().collect::<Vec<_>>().join(", ");
-    if names.iter().any(|n| n == "metadata.json") {
-        bail!(
-            "{} holds a dataset (metadata.json); phi simulate does not write into one: choose \
-             another --out",
-            out.display()
-        );
-    }
-    // A frame directory is ours when it holds only frames (and temporary files of their atomic
-    // writes); anything else is foreign, named with its path inside `out`.
-    let mut our_dirs = Vec::new();
-    let mut foreign: Vec<String> = Vec::new();
-    for name in &names {
-        if is_run_file(name) {
-            continue;
-        }
-        let Some((dir_name, extension)) = RUN_DIRS.iter().find(|(d, _)| d == name) else {
-            foreign.push(name.clone());
-            continue;
-        };
-        let dir = out.join(dir_name);
-        if !dir.is_dir() {
-            foreign.push(name.clone());
-            continue;
-        }
-        let inside = list(&dir)?;
-        match inside.iter().find(|n| {
-            !((n.starts_with("frame_") && n.ends_with(extension)) || n.starts_with(".frame_"))
-        }) {
-            Some(other) => foreign.push(format!("{dir_name}/{other}")),
-            None => our_dirs.push(*dir_name),
-        }
-    }
-    let previous_run = names.iter().any(|n| n == "run.json");
-    if !force {
-        bail!(
-            "{} is not empty ({} entries: {shown}{}){}",
-            out.display(),
-            names.len(),
-            if names.len() > 3 { ", ..." } else { "" },
-            if previous_run && foreign.is_empty() {
-                "; it holds a previous run: pass --force to replace it"
-            } else {
-                "; choose an empty or new --out"
-            }
-        );
-    }
-    if let Some(first) = foreign.first() {
-        bail!(
-            "{} holds files phi simulate does not write (e.g. {first}); --force replaces only a \
-             previous run: choose an empty or new --out",
-            out.display()
-        );
-    }
-    for dir_name in our_dirs {
-        let dir = out.join(dir_name);
-        std::fs::remove_dir_all(&dir)
-            .with_context(|| format!("removing the previous run's {}", dir.display()))?;
-    }
-    for name in names.iter().filter(|n| is_run_file(n)) {
-        let path = out.join(name);
-        std::fs::remove_file(&path)
-            .with_context(|| format!("removing the previous run's {}", path.display()))?;
-    }
-    Ok(())
+    check_dir(out, &RUN_OUTPUTS, force)?.remove()
 }
 
 fn write_run_file(

@@ -26,6 +26,9 @@ pub enum DatasetCommand {
         /// The shard directories (`phi dataset generate --shard k/n`).
         #[arg(required = true)]
         shards: Vec<PathBuf>,
+        /// Replace a dataset in OUT (a folder holding anything else is refused even then).
+        #[arg(long)]
+        force: bool,
     },
     /// Particle counts and the neighbour-count distribution over time (thesis fig. 5.4).
     Stats {
@@ -43,6 +46,9 @@ pub enum DatasetCommand {
         /// Draw the distribution over time into this PNG.
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Replace an existing PNG --out (any other file is refused even then).
+        #[arg(long)]
+        force: bool,
         /// Print every this many frames.
         #[arg(long, default_value_t = 25)]
         print_every: usize,
@@ -128,6 +134,11 @@ pub struct GenerateArgs {
     pub resume: bool,
     /// Delete trajectory files beyond --count instead of refusing to run.
     #[arg(long)]
+    pub prune: bool,
+    /// Replace a dataset this command wrote in --out: its files are removed and every
+    /// trajectory made again (a folder holding anything else is refused even then). Before,
+    /// --force deleted only the trajectories beyond --count: that is --prune now.
+    #[arg(long, conflicts_with = "resume")]
     pub force: bool,
     /// Make the test split from the scene files (*.toml) of this folder, in name order, instead
     /// of the ten built-in ones; they share one domain size and time step, which become the
@@ -160,7 +171,7 @@ pub struct RenderArgs {
     /// Draw every this many frames.
     #[arg(long, default_value_t = 2)]
     pub frame_every: usize,
-    /// Overwrite an existing --out that is not a GIF.
+    /// Replace an existing GIF --out (any other file is refused even then).
     #[arg(long)]
     pub force: bool,
 }
@@ -172,8 +183,8 @@ pub struct RenderArgs {
 pub fn run(command: DatasetCommand) -> Result<()> {
     match command {
         DatasetCommand::Generate(args) => run_generate(args),
-        DatasetCommand::Merge { out, shards } => {
-            let summary = merge(&out, &shards)?;
+        DatasetCommand::Merge { out, shards, force } => {
+            let summary = merge(&out, &shards, force)?;
             println!(
                 "merged {} shard(s) into {}: {}",
                 shards.len(),
@@ -193,6 +204,7 @@ pub fn run(command: DatasetCommand) -> Result<()> {
             radius,
             limit,
             out,
+            force,
             print_every,
         } => {
             let report = dataset_stats(&StatsOptions {
@@ -201,6 +213,7 @@ pub fn run(command: DatasetCommand) -> Result<()> {
                 radius,
                 limit,
                 out: out.clone(),
+                force,
                 progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
             })?;
             print!("{}", format_report(&report, &dir, radius, print_every));
@@ -375,6 +388,7 @@ fn run_generate(args: GenerateArgs) -> Result<()> {
         threads: args.threads,
         shard: args.shard,
         resume: args.resume,
+        prune: args.prune,
         force: args.force,
         scenes,
         position_scale: args.position_scale,

@@ -8,6 +8,8 @@
 //! only the trajectories in flight, and running the same command again skips every finished
 //! file. `generator.json`, written before the first trajectory, records the configuration, so
 //! a directory holding another configuration's files is refused (unless `--resume`).
+//! `--force` replaces a dataset this command wrote ([`GENERATE_OUTPUTS`]): its files are removed
+//! and every trajectory made again; `--prune` deletes only the trajectories beyond `--count`.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -22,11 +24,12 @@ use phi_gns::data::{
 use rayon::prelude::*;
 
 use super::manifest::{
-    GeneratorConfig, MANIFEST, Manifest, Shard, read_generator, read_manifest,
+    GENERATE_OUTPUTS, GeneratorConfig, MANIFEST, Manifest, Shard, read_generator, read_manifest,
     write_dataset_metadata, write_manifest,
 };
 use super::{Split, TestScenes, check_dir, position_scale, simulate_trajectory, trajectory_seed};
 use crate::memory::check_memory;
+use crate::output::target::check_dir as check_outputs;
 
 /// What `phi dataset generate` does.
 #[derive(Debug, Clone)]
@@ -51,6 +54,8 @@ pub struct GenerateOptions {
     /// Continue in a directory whose manifest differs or is missing.
     pub resume: bool,
     /// Delete trajectory files beyond this run's count instead of refusing to.
+    pub prune: bool,
+    /// Replace the dataset in `out` ([`GENERATE_OUTPUTS`]) instead of continuing it.
     pub force: bool,
     /// The test split's scenes.
     pub scenes: TestScenes,
@@ -100,7 +105,17 @@ pub fn generate(options: &GenerateOptions) -> Result<GenerateSummary> {
         &options.scenes,
         options.position_scale,
     );
-    check_compatible(out, &config, options.shard, options.resume)?;
+    // With --force the previous dataset is replaced: checked here, removed once this run has
+    // passed its own checks.
+    let previous = if options.force {
+        if options.resume {
+            bail!("--force replaces the dataset in --out, --resume continues it: pass one");
+        }
+        Some(check_outputs(out, &GENERATE_OUTPUTS, true)?)
+    } else {
+        check_compatible(out, &config, options.shard, options.resume)?;
+        None
+    };
 
     let mut counts = BTreeMap::new();
     for &split in &options.splits {
@@ -110,9 +125,11 @@ pub fn generate(options: &GenerateOptions) -> Result<GenerateSummary> {
         }
         counts.insert(split.name().to_string(), count);
     }
-    if let Some(previous) = read_manifest(out)? {
+    if previous.is_none()
+        && let Some(manifest) = read_manifest(out)?
+    {
         // Keep what an earlier run asked for in splits this run does not make.
-        for (split, count) in previous.counts {
+        for (split, count) in manifest.counts {
             counts.entry(split).or_insert(count);
         }
     }
@@ -134,15 +151,18 @@ pub fn generate(options: &GenerateOptions) -> Result<GenerateSummary> {
         ),
         jobs_asked * job_bytes,
     )?;
+    if let Some(previous) = previous {
+        previous.remove()?;
+    }
     let beyond = files_beyond(out, &counts)?;
     if let Some((split, index, count)) = beyond.first()
-        && !options.force
+        && !options.prune
     {
         let last = beyond.iter().map(|b| b.1).max().unwrap_or(*index);
         bail!(
             "{} holds {split}/{} beyond the {count} {split} trajectories asked for ({} such \
-             file(s)); pass --count {} or more to keep and extend them, or --force to delete \
-             them",
+             file(s)); pass --count {} or more to keep and extend them, --prune to delete them, \
+             or --force to replace the whole dataset",
             out.display(),
             trajectory_file_name(*index),
             beyond.len(),
@@ -259,8 +279,9 @@ fn check_compatible(
         Some(m) => Some((m.config.to_json(), Some(m.shard))),
         None => read_generator(out)?.map(|value| (value, None)),
     };
-    let hint = "choose another --out, or pass --resume to continue in it anyway (finished \
-                trajectories whose seed and length match are kept, the others remade)";
+    let hint = "choose another --out, pass --force to replace it, or --resume to continue in it \
+                anyway (finished trajectories whose seed and length match are kept, the others \
+                remade)";
     match stored {
         Some((value, stored_shard)) => {
             let differences = config.differences(&value);
@@ -283,15 +304,24 @@ fn check_compatible(
             }
         }
         None => {
-            let foreign = out.is_dir()
-                && std::fs::read_dir(out)
+            let first = if out.is_dir() {
+                let mut names = std::fs::read_dir(out)
                     .with_context(|| format!("reading {}", out.display()))?
-                    .next()
-                    .is_some();
-            if foreign && !resume {
+                    .map(|e| e.map(|e| e.file_name().to_string_lossy().into_owned()))
+                    .collect::<std::io::Result<Vec<_>>>()
+                    .with_context(|| format!("reading {}", out.display()))?;
+                names.sort();
+                names.into_iter().next()
+            } else {
+                None
+            };
+            if let Some(first) = first
+                && !resume
+            {
                 bail!(
-                    "{} is not empty and holds no phi dataset ({MANIFEST} or metadata.json); \
-                     {hint}",
+                    "{} is not empty (it holds '{first}') and holds no phi dataset ({MANIFEST} or \
+                     metadata.json); choose another --out, or pass --resume to continue in it \
+                     anyway",
                     out.display()
                 );
             }

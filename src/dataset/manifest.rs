@@ -16,9 +16,46 @@ use phi_io::write_atomic;
 use serde::{Deserialize, Serialize};
 
 use super::{Split, TestScenes};
+use crate::output::target::{OutputSubdir, Outputs};
 
 /// The name of the generation manifest in a dataset directory.
 pub const MANIFEST: &str = "generator.json";
+
+/// The split folders of a dataset `phi dataset generate` and `phi dataset merge` write, with
+/// their trajectory files (`traj_NNNNN.npz`).
+const SPLIT_DIRS: &[OutputSubdir] = &[
+    OutputSubdir {
+        name: "train",
+        prefix: "traj_",
+        suffix: ".npz",
+    },
+    OutputSubdir {
+        name: "valid",
+        prefix: "traj_",
+        suffix: ".npz",
+    },
+    OutputSubdir {
+        name: "test",
+        prefix: "traj_",
+        suffix: ".npz",
+    },
+];
+
+/// What `phi dataset generate` writes: a dataset (or a shard of one) with its [`MANIFEST`].
+pub const GENERATE_OUTPUTS: Outputs = Outputs {
+    command: "phi dataset generate",
+    flag: "--out",
+    files: &[MANIFEST, METADATA_FILE],
+    subdirs: SPLIT_DIRS,
+    marker: Some(MANIFEST),
+};
+
+/// What `phi dataset merge` writes: the same files as [`GENERATE_OUTPUTS`].
+pub const MERGE_OUTPUTS: Outputs = Outputs {
+    command: "phi dataset merge",
+    flag: "OUT",
+    ..GENERATE_OUTPUTS
+};
 
 /// `--shard k/n`: this run makes the trajectories whose index is `k` modulo `n`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -5,6 +5,10 @@
 //! directory; the statistics come from the statistics stored in each file, merged in split and
 //! index order, so a merged dataset has the same bytes as an unsharded run of the same
 //! configuration.
+//!
+//! `OUT` must be new or empty; `--force` replaces a dataset that `phi dataset generate` or
+//! `phi dataset merge` wrote there (its files are removed once every source is found). A folder
+//! holding anything else, or one of the shards itself, is refused.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -12,8 +16,10 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use phi_gns::data::trajectory_file_name;
 
-use super::check_dir;
-use super::manifest::{MANIFEST, Manifest, Shard, read_manifest, write_dataset_metadata};
+use super::manifest::{
+    MANIFEST, MERGE_OUTPUTS, Manifest, Shard, read_manifest, write_dataset_metadata,
+};
+use crate::output::target::check_dir;
 
 /// What a merge did.
 #[derive(Debug, Clone, Default)]
@@ -25,16 +31,29 @@ pub struct MergeSummary {
 }
 
 /// Joins the shard directories `shards` (made by `phi dataset generate --shard k/n` with one
-/// configuration) into the dataset `out`.
+/// configuration) into the dataset `out`, replacing a dataset there only with `force`
+/// ([`MERGE_OUTPUTS`]).
 ///
 /// # Errors
 /// Shards of different configurations, a trajectory that no shard holds, an output directory
-/// holding another dataset, I/O errors.
-pub fn merge(out: &Path, shards: &[PathBuf]) -> Result<MergeSummary> {
+/// that is one of the shards, holds anything but a dataset, or a dataset without `force`; I/O
+/// errors.
+pub fn merge(out: &Path, shards: &[PathBuf], force: bool) -> Result<MergeSummary> {
     if shards.is_empty() {
         bail!("give at least one shard directory");
     }
-    check_dir(out)?;
+    if let Ok(target) = out.canonicalize()
+        && let Some(shard) = shards
+            .iter()
+            .find(|s| s.canonicalize().is_ok_and(|s| s == target))
+    {
+        bail!(
+            "OUT {} is the shard {}; merge into a new directory",
+            out.display(),
+            shard.display()
+        );
+    }
+    let previous = check_dir(out, &MERGE_OUTPUTS, force)?;
     let mut manifests = Vec::new();
     for dir in shards {
         let manifest = read_manifest(dir)?.with_context(|| {
@@ -65,19 +84,6 @@ pub fn merge(out: &Path, shards: &[PathBuf]) -> Result<MergeSummary> {
             *entry = (*entry).max(count);
         }
     }
-    if let Some(existing) = read_manifest(out)? {
-        let differences = config.differences(&existing.config.to_json());
-        if !differences.is_empty() {
-            bail!(
-                "{} holds a dataset of another configuration (differing keys: {})",
-                out.display(),
-                differences.join(", ")
-            );
-        }
-    } else if out.is_dir() && std::fs::read_dir(out)?.next().is_some() {
-        bail!("{} is not empty and holds no phi dataset", out.display());
-    }
-
     // Every source is found before anything is written, so a merge that cannot finish (a shard
     // not run yet) leaves `out` as it was.
     let mut pairs = Vec::new();
@@ -96,6 +102,7 @@ pub fn merge(out: &Path, shards: &[PathBuf]) -> Result<MergeSummary> {
             pairs.push((source, out.join(split).join(&name)));
         }
     }
+    previous.remove()?;
     for split in counts.keys() {
         let dir = out.join(split);
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -121,35 +128,18 @@ pub fn merge(out: &Path, shards: &[PathBuf]) -> Result<MergeSummary> {
     Ok(summary)
 }
 
-/// Hard-links `source` to `target` (replacing it), or copies through a temporary file and a
-/// rename where linking is not possible.
+/// Hard-links `source` to the new file `target`, or copies through a temporary file
+/// (`.{name}.tmp-{pid}`) and a rename where linking is not possible.
 fn link_or_copy(source: &Path, target: &Path) -> Result<()> {
-    if target.exists() {
-        if same_file(source, target) {
-            return Ok(());
-        }
-        std::fs::remove_file(target).with_context(|| format!("replacing {}", target.display()))?;
-    }
     if std::fs::hard_link(source, target).is_ok() {
         return Ok(());
     }
-    let temp = target.with_extension(format!("tmp-{}", std::process::id()));
+    let mut name = std::ffi::OsString::from(".");
+    name.push(target.file_name().unwrap_or_default());
+    name.push(format!(".tmp-{}", std::process::id()));
+    let temp = target.with_file_name(name);
     std::fs::copy(source, &temp)
         .with_context(|| format!("copying {} to {}", source.display(), temp.display()))?;
     std::fs::rename(&temp, target).with_context(|| format!("renaming {}", temp.display()))?;
     Ok(())
-}
-
-#[cfg(unix)]
-fn same_file(a: &Path, b: &Path) -> bool {
-    use std::os::unix::fs::MetadataExt;
-    match (std::fs::metadata(a), std::fs::metadata(b)) {
-        (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
-        _ => false,
-    }
-}
-
-#[cfg(not(unix))]
-fn same_file(_: &Path, _: &Path) -> bool {
-    false
 }

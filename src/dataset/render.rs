@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use phi_gns::data::{Dataset, LIQUID, METADATA_FILE, Metadata};
 
+use crate::output::target::{OutputFile, check_file};
 use crate::output::{
     FrameStyle, GifWriter, KIND_LIQUID, KIND_OBSTACLE, MAX_PIXELS, RgbImage, render_frame,
 };
@@ -114,7 +115,8 @@ impl DatasetRenderer {
 ///
 /// The dataset is opened and checked ([`Dataset::open`]), and the trajectory read is checked
 /// against its place (index, seed). The GIF is drawn into a temporary file renamed to `out` when
-/// complete. An existing `out` that is not a GIF is refused unless `force`.
+/// complete. An existing GIF `out` is replaced only with `force`; any other file is refused
+/// ([`RENDER_OUTPUT`]).
 ///
 /// # Errors
 /// A missing or inconsistent dataset or trajectory, an `out` that would destroy another file,
@@ -128,7 +130,7 @@ pub fn render_trajectory(
     frame_every: usize,
     force: bool,
 ) -> Result<usize> {
-    check_overwrite(out, force)?;
+    check_file(out, &RENDER_OUTPUT, force)?;
     let dataset = Dataset::open(dir)?;
     let metadata = dataset.metadata();
     let count = dataset.split_len(split)?;
@@ -185,28 +187,10 @@ fn temp_path(out: &Path) -> Result<PathBuf> {
     Ok(out.with_file_name(temp))
 }
 
-/// Refuses to write the GIF `out` over a directory, or over a file that is not a GIF unless
-/// `force` (a GIF is a picture to be drawn again; anything else may be data).
-fn check_overwrite(out: &Path, force: bool) -> Result<()> {
-    if out.is_dir() {
-        bail!(
-            "--out {} is a directory; name the GIF file to write",
-            out.display()
-        );
-    }
-    if out.exists() && !force {
-        let mut magic = [0u8; 6];
-        let is_gif = std::fs::File::open(out)
-            .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut magic))
-            .is_ok()
-            && (&magic == b"GIF89a" || &magic == b"GIF87a");
-        if !is_gif {
-            bail!(
-                "--out {} exists and is not a GIF; refusing to overwrite it (pass --force to \
-                 replace it)",
-                out.display()
-            );
-        }
-    }
-    Ok(())
-}
+/// What `phi render` writes: a GIF, replaced only with `--force`.
+pub const RENDER_OUTPUT: OutputFile = OutputFile {
+    command: "phi render",
+    flag: "--out",
+    kind: "a GIF",
+    magic: &[b"GIF89a", b"GIF87a"],
+};

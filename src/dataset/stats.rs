@@ -12,6 +12,7 @@ use anyhow::{Context, Result, bail};
 use phi_gns::data::{Dataset, LIQUID, METADATA_FILE, Trajectory};
 
 use crate::memory::check_memory;
+use crate::output::target::{OutputFile, check_file};
 use rayon::prelude::*;
 
 use phi_plot::{Legend, LinePlot, Series};
@@ -32,9 +33,19 @@ pub struct StatsOptions {
     pub limit: usize,
     /// Where to draw the plot, if anywhere.
     pub out: Option<PathBuf>,
+    /// Replace an existing PNG `out` ([`STATS_OUTPUT`]).
+    pub force: bool,
     /// Draw a progress bar over the trajectories on stderr.
     pub progress: bool,
 }
+
+/// What `phi dataset stats --out` writes: a PNG, replaced only with `--force`.
+pub const STATS_OUTPUT: OutputFile = OutputFile {
+    command: "phi dataset stats",
+    flag: "--out",
+    kind: "a PNG",
+    magic: &[b"\x89PNG\r\n\x1a\n"],
+};
 
 /// Smallest, mean and largest of a count over trajectories.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -97,6 +108,9 @@ pub struct StatsReport {
 pub fn dataset_stats(options: &StatsOptions) -> Result<StatsReport> {
     if !(options.radius.is_finite() && options.radius > 0.0) {
         bail!("--radius must be positive, got {}", options.radius);
+    }
+    if let Some(out) = &options.out {
+        check_file(out, &STATS_OUTPUT, options.force)?;
     }
     let dataset = Dataset::open(&options.dir)?;
     let metadata = dataset.metadata();

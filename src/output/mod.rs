@@ -6,7 +6,9 @@
 //! - [`render`]: drawing particle frames ([`render_frame`]) and saving them as PNG pictures
 //!   ([`write_png`]) or streamed animated GIFs ([`GifWriter`]);
 //! - [`vtk`]: particle frames as VTK `.vtu` files and a `.pvd` series for ParaView
-//!   ([`vtk::VtkSeries`]).
+//!   ([`vtk::VtkSeries`]);
+//! - [`target`]: the rule every writing command applies to its target (new or empty, or its
+//!   own previous output, replaced only with `--force`).
 //!
 //! Every fallible function returns [`OutputError`]; errors about a file name it.
 //! Files that are written in one go ([`write_npz`], [`write_npy`], [`write_png`]) are written
@@ -15,6 +17,7 @@
 //! readers never see a half-written file.
 
 pub mod render;
+pub mod target;
 pub mod vtk;
 
 /// NumPy `.npy` arrays and `.npz` archives: [`phi_io::npz`], re-exported.

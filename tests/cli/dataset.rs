@@ -172,6 +172,63 @@ fn merged_shards_equal_an_unsharded_run() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+/// `phi dataset merge` writes a new or empty OUT; it replaces a dataset there only with
+/// `--force`, and refuses a folder holding anything else, or a shard itself, even then.
+#[test]
+fn merge_replaces_a_dataset_only_with_force() {
+    let dir = scratch("dataset-merge-force");
+    let (a, b) = (dir.join("a"), dir.join("b"));
+    ok(generate(&a, &["--split", "train", "--shard", "0/2"]));
+    ok(generate(&b, &["--split", "train", "--shard", "1/2"]));
+    let merged = dir.join("merged");
+    std::fs::create_dir_all(&merged).unwrap();
+    ok(run(&["dataset", "merge"], &[&merged, &a, &b]));
+    let before = files(&merged);
+    let metadata = std::fs::read(merged.join("metadata.json")).unwrap();
+    let stderr = failed(run(&["dataset", "merge"], &[&merged, &a, &b]));
+    assert!(
+        stderr.contains("merged") && stderr.contains("--force"),
+        "{stderr}"
+    );
+    assert_eq!(files(&merged), before);
+    // A file of the old dataset that the new one does not have is gone after --force.
+    std::fs::copy(
+        merged.join("train/traj_00000.npz"),
+        merged.join("train/traj_00009.npz"),
+    )
+    .unwrap();
+    ok(run(&["dataset", "merge", "--force"], &[&merged, &a, &b]));
+    assert_eq!(files(&merged), before);
+    assert_eq!(
+        std::fs::read(merged.join("metadata.json")).unwrap(),
+        metadata
+    );
+    Dataset::open(&merged).unwrap();
+
+    for foreign in ["notes.txt", "train/notes.txt"] {
+        let other = dir.join(format!("other-{}", foreign.replace('/', "-")));
+        std::fs::create_dir_all(other.join("train")).unwrap();
+        std::fs::write(other.join(foreign), "mine").unwrap();
+        for force in [&[][..], &["--force"][..]] {
+            let stderr = failed(run(
+                &[&["dataset", "merge"], force].concat(),
+                &[&other, &a, &b],
+            ));
+            assert!(
+                stderr.contains(&format!("'{foreign}'")) && stderr.contains("does not write"),
+                "{stderr}"
+            );
+        }
+        assert_eq!(std::fs::read(other.join(foreign)).unwrap(), b"mine");
+        assert!(!other.join("metadata.json").exists());
+    }
+    let shard = files(&a);
+    let stderr = failed(run(&["dataset", "merge", "--force"], &[&a, &a, &b]));
+    assert!(stderr.contains("is the shard"), "{stderr}");
+    assert_eq!(files(&a), shard);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
 #[test]
 fn a_directory_of_another_dataset_is_refused() {
     let dir = scratch("dataset-foreign");
@@ -264,6 +321,29 @@ fn render_writes_a_gif_and_stats_a_png() {
     // The IHDR chunk: width and height of the labelled plot.
     let size = |at: usize| u32::from_be_bytes(bytes[at..at + 4].try_into().unwrap());
     assert_eq!((size(16), size(20)), (900, 520));
+
+    // An existing PNG is replaced only with --force; any other file is refused even then.
+    let stats = |png: &Path, force: bool| {
+        let force: &[&str] = if force { &["--force"] } else { &[] };
+        run(
+            &[&["dataset", "stats", "--split", "test"], force, &["--out"]].concat(),
+            &[png, &out],
+        )
+    };
+    std::fs::write(&png, b"\x89PNG\r\n\x1a\n old").unwrap();
+    let stderr = failed(stats(&png, false));
+    assert!(
+        stderr.contains("n.png") && stderr.contains("--force"),
+        "{stderr}"
+    );
+    assert_eq!(std::fs::read(&png).unwrap(), b"\x89PNG\r\n\x1a\n old");
+    ok(stats(&png, true));
+    assert_eq!(std::fs::read(&png).unwrap(), bytes);
+    let notes = dir.join("notes.txt");
+    std::fs::write(&notes, "mine").unwrap();
+    let stderr = failed(stats(&notes, true));
+    assert!(stderr.contains("is not a PNG"), "{stderr}");
+    assert_eq!(std::fs::read(&notes).unwrap(), b"mine");
     let _ = std::fs::remove_dir_all(dir);
 }
 

@@ -202,7 +202,7 @@ fn quiet_keeps_the_results_and_drops_the_log() {
 }
 
 #[test]
-fn a_smaller_count_is_refused_unless_forced() {
+fn a_smaller_count_is_refused_unless_pruned() {
     let dir = scratch("faults-count");
     let data = dir.join("data");
     ok(generate(&data, "train", 2, &[]));
@@ -211,14 +211,61 @@ fn a_smaller_count_is_refused_unless_forced() {
     assert!(
         stderr.contains("train/traj_00001.npz")
             && stderr.contains("--count 2")
-            && stderr.contains("--force"),
+            && stderr.contains("--prune"),
         "{stderr}"
     );
     assert_eq!(snapshot(&data), before);
-    ok(generate(&data, "train", 1, &["--force"]));
+    ok(generate(&data, "train", 1, &["--prune"]));
     let dataset = Dataset::open(&data).unwrap();
     assert_eq!(dataset.metadata().splits["train"], 1);
     assert!(!data.join("train/traj_00001.npz").exists());
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// `generate --force` means what it means for every command: it replaces a dataset that
+/// `phi dataset generate` wrote (of any configuration), and nothing else.
+#[test]
+fn generate_force_replaces_only_its_own_dataset() {
+    let dir = scratch("faults-generate-force");
+    let data = dir.join("data");
+    ok(generate(&data, "train", 2, &[]));
+    let before = snapshot(&data);
+    let stderr = fails(generate(&data, "train", 1, &["--seed", "5"]));
+    assert!(
+        stderr.contains("another configuration") && stderr.contains("--force"),
+        "{stderr}"
+    );
+    assert_eq!(snapshot(&data), before);
+    // Replaced whole: the new seed, one trajectory, nothing of the old dataset left.
+    ok(generate(&data, "train", 1, &["--seed", "5", "--force"]));
+    let metadata = read_metadata(&data).unwrap();
+    assert_eq!(metadata.splits["train"], 1);
+    assert_eq!(metadata.generator["seed"], 5);
+    assert!(!data.join("train/traj_00001.npz").exists());
+    let stderr = fails(generate(&data, "train", 1, &["--force", "--resume"]));
+    assert!(stderr.contains("--resume"), "{stderr}");
+
+    // A folder holding anything else is refused even with --force, and left as it was.
+    for foreign in ["notes.txt", "train/notes.txt"] {
+        let other = dir.join(format!("other-{}", foreign.replace('/', "-")));
+        ok(generate(&other, "train", 1, &[]));
+        std::fs::write(other.join(foreign), "mine").unwrap();
+        let before = snapshot(&other);
+        let stderr = fails(generate(&other, "train", 1, &["--force"]));
+        assert!(
+            stderr.contains(&format!("'{foreign}'")) && stderr.contains("does not write"),
+            "{stderr}"
+        );
+        assert_eq!(snapshot(&other), before);
+    }
+    // A dataset it did not write (no generator.json: imported, say) is not its to replace.
+    let imported = dir.join("imported");
+    ok(generate(&imported, "train", 1, &[]));
+    std::fs::remove_file(imported.join("generator.json")).unwrap();
+    let before = snapshot(&imported);
+    let stderr = fails(generate(&imported, "train", 1, &["--force"]));
+    assert!(stderr.contains("no generator.json"), "{stderr}");
+    assert_eq!(snapshot(&imported), before);
     let _ = std::fs::remove_dir_all(dir);
 }
 
@@ -291,24 +338,41 @@ fn import_export_and_render_never_overwrite_data_unless_forced() {
     assert!(stderr.contains("holds the dataset"), "{stderr}");
     Dataset::open(&other).unwrap();
 
-    // Render over a file that is not a GIF: refused; over a GIF: redrawn.
+    // Render over a file that is not a GIF: refused, even with --force; a new GIF is drawn;
+    // over a GIF: refused, redrawn with --force.
     let metadata = other.join("metadata.json");
     let text = std::fs::read(&metadata).unwrap();
-    let stderr = fails(run(
-        &["render", "--split", "train", "--out"],
-        &[&metadata, &other],
-    ));
-    assert!(stderr.contains("is not a GIF"), "{stderr}");
+    for force in [&[][..], &["--force"][..]] {
+        let stderr = fails(run(
+            &[&["render", "--split", "train"], force, &["--out"]].concat(),
+            &[&metadata, &other],
+        ));
+        assert!(
+            stderr.contains("is not a GIF") && stderr.contains("metadata.json"),
+            "{stderr}"
+        );
+    }
     assert_eq!(std::fs::read(&metadata).unwrap(), text);
     let gif = dir.join("t.gif");
     ok(run(
+        &["render", "--split", "train", "--frame-every", "1", "--out"],
+        &[&gif, &other],
+    ));
+    let drawn = std::fs::read(&gif).unwrap();
+    let stderr = fails(run(
         &["render", "--split", "train", "--out"],
         &[&gif, &other],
     ));
+    assert!(
+        stderr.contains("t.gif") && stderr.contains("--force"),
+        "{stderr}"
+    );
+    assert_eq!(std::fs::read(&gif).unwrap(), drawn);
     ok(run(
-        &["render", "--split", "train", "--out"],
+        &["render", "--split", "train", "--force", "--out"],
         &[&gif, &other],
     ));
+    assert_ne!(std::fs::read(&gif).unwrap(), drawn, "not redrawn");
     let _ = std::fs::remove_dir_all(dir);
 }
 

@@ -282,3 +282,69 @@ fn optimize_through_a_gns_runs_and_refuses_a_model_of_other_bounds() {
     );
     assert!(missing.contains("--model"), "{missing}");
 }
+
+/// One rule for the output folder: a new one is written; a previous run is refused unless
+/// `--force`, which replaces it whole (no frame of the old run remains); a folder holding
+/// anything `phi optimize` does not write is refused even with `--force`, and left as it was.
+#[test]
+fn optimize_replaces_a_previous_run_only_with_force() {
+    let dir = scratch("optimize-force");
+    let config = dir.join("tiny.toml");
+    std::fs::write(&config, CONFIG).unwrap();
+    let optimize = |out: &std::path::Path, iterations: &str, force: bool| {
+        let mut command = phi();
+        command
+            .args(["-q", "optimize"])
+            .arg(&config)
+            .arg("--out")
+            .arg(out)
+            .args(["--backend", "burn", "--iterations", iterations]);
+        command.args(["--frame-every", "1"]);
+        if force {
+            command.arg("--force");
+        }
+        command.output().unwrap()
+    };
+    let out = dir.join("run");
+    ok(optimize(&out, "2", false));
+    assert!(out.join("frames/iteration_002_final.png").is_file());
+    let summary = std::fs::read(out.join("summary.json")).unwrap();
+    let refused = optimize(&out, "1", false);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success(), "a previous run was overwritten");
+    assert!(
+        stderr.contains(&*out.to_string_lossy())
+            && stderr.contains("previous `phi optimize` output")
+            && stderr.contains("--force"),
+        "{stderr}"
+    );
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), summary);
+    ok(optimize(&out, "1", true));
+    assert!(out.join("frames/iteration_001_final.png").is_file());
+    assert!(
+        !out.join("frames/iteration_002_final.png").exists(),
+        "a frame of the old run is left"
+    );
+
+    for foreign in ["notes.txt", "frames/notes.txt"] {
+        let other = dir.join(format!("other-{}", foreign.replace('/', "-")));
+        std::fs::create_dir_all(other.join("frames")).unwrap();
+        std::fs::write(other.join(foreign), "mine").unwrap();
+        for force in [false, true] {
+            let refused = optimize(&other, "1", force);
+            let stderr = String::from_utf8_lossy(&refused.stderr);
+            assert!(!refused.status.success(), "{foreign} was overwritten");
+            assert!(
+                stderr.contains(&format!("'{foreign}'")) && stderr.contains("does not write"),
+                "{stderr}"
+            );
+        }
+        assert_eq!(std::fs::read(other.join(foreign)).unwrap(), b"mine");
+        assert!(!other.join("loss.csv").exists());
+    }
+    let file = dir.join("file");
+    std::fs::write(&file, "mine").unwrap();
+    let stderr = String::from_utf8_lossy(&optimize(&file, "1", true).stderr).into_owned();
+    assert!(stderr.contains("is not a directory"), "{stderr}");
+    let _ = std::fs::remove_dir_all(dir);
+}
