@@ -1,6 +1,7 @@
 //! Plots for phi as PNG images: line plots with min–max bands ([`LinePlot`], [`Series`]),
-//! grouped bar charts ([`BarChart`]) and multi-panel figures of both ([`Figure`]); and captions
-//! on other pictures ([`draw_text`]).
+//! grouped bar charts ([`BarChart`]), multi-panel figures of both ([`Figure`]) and heat maps
+//! with a colour bar ([`HeatMap`], coloured by [`colormap`]); and captions on other pictures
+//! ([`draw_text`]).
 //!
 //! Every chart has a title, labelled axes with ticks and a grid, and a legend; series take the
 //! colours of a fixed qualitative palette ([`PALETTE`]) in order, and a series' band is a
@@ -42,6 +43,7 @@ mod caption;
 mod chart;
 mod error;
 mod figure;
+mod heatmap;
 mod line;
 mod style;
 #[cfg(test)]
@@ -54,5 +56,6 @@ pub use caption::{draw_text, text_size};
 pub use chart::Legend;
 pub use error::PlotError;
 pub use figure::{Figure, Panel};
+pub use heatmap::{HeatMap, colormap};
 pub use line::{Band, LinePlot, Series};
 pub use style::{BAND_OPACITY, PALETTE, series_color};

@@ -467,3 +467,122 @@ fn figure_errors_name_the_figure() {
     let broken = Figure::new("fig", 1).with_panel(LinePlot::new("empty panel", "", ""));
     assert_eq!(message(broken.render()), "plot 'empty panel' has no series");
 }
+
+mod heat_map {
+    use super::near;
+    use crate::{HeatMap, PlotError, colormap};
+
+    /// 2 rows × 3 columns, the values 0 to 5 row by row from the bottom.
+    fn six_cells() -> HeatMap {
+        HeatMap::new(
+            "six cells",
+            "frame",
+            "neighbours",
+            "share",
+            (2, 3),
+            vec![0.0, 1.0, 2.0, 3.0, 4.0, 5.0],
+        )
+        .with_extent((-0.5, 2.5), (10.0, 12.0))
+        .with_size(600, 400)
+    }
+
+    #[test]
+    fn colormap_runs_from_violet_to_yellow() {
+        assert_eq!(colormap(0.0), [68, 1, 84]);
+        assert_eq!(colormap(0.5), [38, 130, 142]);
+        assert_eq!(colormap(1.0), [253, 231, 37]);
+        assert_eq!(colormap(-3.0), colormap(0.0));
+        assert_eq!(colormap(7.0), colormap(1.0));
+        // Halfway between the first two stops.
+        assert_eq!(colormap(0.0625), [70, 21, 102]);
+    }
+
+    #[test]
+    fn each_cell_has_the_colour_of_its_value_where_the_axes_put_it() {
+        let (image, frame) = six_cells().render_framed().unwrap();
+        assert_eq!((image.width, image.height), (600, 400));
+        for (k, value) in (0..6).map(|k| (k, k as f64)) {
+            let (row, column) = (k / 3, k % 3);
+            // The cell's centre in data coordinates: x = column, y = 10.5 + row.
+            let (x, y) = frame.map.pixel(column as f64, 10.5 + row as f64);
+            let pixel = image.pixel(x, y).unwrap();
+            assert!(
+                near(pixel, colormap(value / 5.0), 1),
+                "cell {k} at ({x}, {y}): {pixel:?}, expected {:?}",
+                colormap(value / 5.0)
+            );
+        }
+        // Row 0 is at the bottom: the cell of 0 is below the cell of 3.
+        assert!(frame.map.pixel(0.0, 10.5).1 > frame.map.pixel(0.0, 11.5).1);
+    }
+
+    #[test]
+    fn the_colour_bar_ends_are_the_maps_ends() {
+        let (image, frame) = six_cells().render_framed().unwrap();
+        let (xs, ys) = frame.bar.clone();
+        let x = (xs.start + xs.end) / 2;
+        let bottom = image.pixel(x, ys.end - 1).unwrap();
+        let top = image.pixel(x, ys.start).unwrap();
+        let (low_cell, high_cell) = (frame.map.pixel(0.0, 10.5), frame.map.pixel(2.0, 11.5));
+        let low = image.pixel(low_cell.0, low_cell.1).unwrap();
+        let high = image.pixel(high_cell.0, high_cell.1).unwrap();
+        assert!(
+            near(bottom, low, 3),
+            "bar bottom {bottom:?}, lowest cell {low:?}"
+        );
+        assert!(near(top, high, 3), "bar top {top:?}, highest cell {high:?}");
+        // Halfway up the bar is halfway along the scale.
+        let middle = image.pixel(x, (ys.start + ys.end) / 2).unwrap();
+        assert!(near(middle, colormap(0.5), 6), "{middle:?}");
+        // The bar stands right of the map, as tall as its plot area.
+        let (map_xs, map_ys) = frame.map.image_area();
+        assert!(xs.start > map_xs.end);
+        assert!(ys.start.abs_diff(map_ys.start) <= 1 && ys.end.abs_diff(map_ys.end) <= 1);
+    }
+
+    #[test]
+    fn a_value_range_clamps_and_non_finite_cells_stay_white() {
+        let mut map = six_cells().with_value_range(1.0, 4.0);
+        map.values[4] = f64::NAN;
+        let (image, frame) = map.render_framed().unwrap();
+        let at = |x: f64, y: f64| {
+            let (x, y) = frame.map.pixel(x, y);
+            image.pixel(x, y).unwrap()
+        };
+        assert!(near(at(0.0, 10.5), colormap(0.0), 1), "below the range");
+        assert!(near(at(2.0, 11.5), colormap(1.0), 1), "above the range");
+        assert!(near(at(1.0, 11.5), [255, 255, 255], 1), "NaN cell");
+    }
+
+    #[test]
+    fn bad_input_is_an_error_naming_the_map() {
+        let mut short = six_cells();
+        short.values.pop();
+        let error = short.render().unwrap_err().to_string();
+        assert!(
+            error.contains("six cells") && error.contains("5 values, expected 6"),
+            "{error}"
+        );
+        let mut none = six_cells();
+        none.values = vec![f64::NAN; 6];
+        assert!(matches!(
+            none.render(),
+            Err(PlotError::NothingToDraw { .. })
+        ));
+        let flat = six_cells().with_extent((1.0, 1.0), (0.0, 1.0));
+        assert!(flat.render().unwrap_err().to_string().contains("x extent"));
+        let empty = HeatMap::new("empty", "", "", "", (0, 3), vec![]);
+        assert!(matches!(empty.render(), Err(PlotError::Empty { .. })));
+    }
+
+    #[test]
+    fn the_png_has_the_maps_size() {
+        let path = std::env::temp_dir().join(format!("phi-plot-heat-{}.png", std::process::id()));
+        six_cells().write_png(&path).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        assert_eq!(&bytes[1..4], b"PNG");
+        let size = |at: usize| u32::from_be_bytes(bytes[at..at + 4].try_into().unwrap());
+        assert_eq!((size(16), size(20)), (600, 400));
+        let _ = std::fs::remove_file(&path);
+    }
+}

@@ -43,10 +43,11 @@ pub enum DatasetCommand {
         /// Measure the first this many trajectories.
         #[arg(long, default_value_t = 50)]
         limit: usize,
-        /// Draw the distribution over time into this PNG.
+        /// Draw the distribution over time into this PNG, and as a heat map into
+        /// {stem}_heatmap.png beside it.
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Replace an existing PNG --out (any other file is refused even then).
+        /// Replace existing PNGs --out and its heat map (any other file is refused even then).
         #[arg(long)]
         force: bool,
         /// Print every this many frames.
@@ -218,7 +219,11 @@ pub fn run(command: DatasetCommand) -> Result<()> {
             })?;
             print!("{}", format_report(&report, &dir, radius, print_every));
             if let Some(out) = out {
-                println!("wrote {}", out.display());
+                println!(
+                    "wrote {} and {}",
+                    out.display(),
+                    super::stats::heatmap_path(&out).display()
+                );
             }
             Ok(())
         }

@@ -1,5 +1,6 @@
 //! `phi dataset stats`: particle counts and the distribution of neighbour counts over time
-//! (thesis fig. 5.4), printed and drawn as a PNG.
+//! (thesis fig. 5.4), printed and drawn as PNGs: percentiles as lines ([`plot`]) and the
+//! share of particles per neighbour count as a heat map ([`heat_map`]).
 //!
 //! Neighbours of a liquid particle are the other particles (liquid or obstacle) within the
 //! connectivity radius in stored units (the GNS graph's edges, without the self-edge). They are
@@ -15,7 +16,7 @@ use crate::memory::check_memory;
 use crate::output::target::{OutputFile, check_file};
 use rayon::prelude::*;
 
-use phi_plot::{Legend, LinePlot, Series};
+use phi_plot::{HeatMap, Legend, LinePlot, Series};
 
 /// Neighbour counts from this value up share the last bin of the histograms.
 pub const MAX_NEIGHBOURS: usize = 127;
@@ -111,6 +112,7 @@ pub fn dataset_stats(options: &StatsOptions) -> Result<StatsReport> {
     }
     if let Some(out) = &options.out {
         check_file(out, &STATS_OUTPUT, options.force)?;
+        check_file(&heatmap_path(out), &STATS_OUTPUT, options.force)?;
     }
     let dataset = Dataset::open(&options.dir)?;
     let metadata = dataset.metadata();
@@ -191,8 +193,59 @@ pub fn dataset_stats(options: &StatsOptions) -> Result<StatsReport> {
         plot(&report, options.radius)?
             .write_png(out)
             .with_context(|| format!("drawing {}", out.display()))?;
+        let heatmap = heatmap_path(out);
+        heat_map(&report, options.radius)?
+            .write_png(&heatmap)
+            .with_context(|| format!("drawing {}", heatmap.display()))?;
     }
     Ok(report)
+}
+
+/// Where `--out PNG` puts the heat map: beside it, `{stem}_heatmap.png`.
+pub fn heatmap_path(out: &Path) -> PathBuf {
+    let stem = out.file_stem().unwrap_or_default().to_string_lossy();
+    out.with_file_name(format!("{stem}_heatmap.png"))
+}
+
+/// Thesis fig. 5.4 as the thesis draws it: per frame (x), the share of the liquid particles of
+/// every measured trajectory that have `k` neighbours (y, one row per count from 0 to the
+/// largest seen), as a heat map with a colour bar.
+///
+/// # Errors
+/// A report without frames (nothing to draw).
+pub fn heat_map(report: &StatsReport, radius: f32) -> Result<HeatMap> {
+    let frames = report.histogram.len();
+    if frames == 0 {
+        bail!("no frames to plot");
+    }
+    let rows = report
+        .histogram
+        .iter()
+        .filter_map(|h| h.iter().rposition(|&c| c > 0))
+        .max()
+        .unwrap_or(0)
+        + 1;
+    let mut values = vec![0.0; rows * frames];
+    for (t, histogram) in report.histogram.iter().enumerate() {
+        let liquid: u64 = histogram.iter().sum();
+        for (k, &count) in histogram.iter().take(rows).enumerate() {
+            values[k * frames + t] = count as f64 / liquid.max(1) as f64;
+        }
+    }
+    let (trajectories, _) = report.trajectories;
+    Ok(HeatMap::new(
+        format!(
+            "Neighbours within R = {radius} of a liquid particle ({}, {trajectories} trajectories)",
+            report.split
+        ),
+        "frame",
+        "neighbours",
+        "share of liquid particles",
+        (rows, frames),
+        values,
+    )
+    .with_extent((-0.5, frames as f64 - 0.5), (-0.5, rows as f64 - 0.5))
+    .with_size(900, 520))
 }
 
 /// Per frame of `trajectory`, how many liquid particles have `k` neighbours within `radius`.

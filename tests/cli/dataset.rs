@@ -321,6 +321,31 @@ fn render_writes_a_gif_and_stats_a_png() {
     // The IHDR chunk: width and height of the labelled plot.
     let size = |at: usize| u32::from_be_bytes(bytes[at..at + 4].try_into().unwrap());
     assert_eq!((size(16), size(20)), (900, 520));
+    // The heat map beside it: as large, and the same as drawn from the report.
+    let heat = std::fs::read(dir.join("n_heatmap.png")).unwrap();
+    assert_eq!(&heat[1..4], b"PNG");
+    let size = |at: usize| u32::from_be_bytes(heat[at..at + 4].try_into().unwrap());
+    assert_eq!((size(16), size(20)), (900, 520));
+    let report = phi::dataset::stats::dataset_stats(&phi::dataset::stats::StatsOptions {
+        dir: out.clone(),
+        split: Some("test".into()),
+        radius: 0.03,
+        limit: 50,
+        out: None,
+        force: false,
+        progress: false,
+    })
+    .unwrap();
+    let map = phi::dataset::stats::heat_map(&report, 0.03).unwrap();
+    assert_eq!(map.columns, report.frames);
+    // Each frame's shares sum to one.
+    for t in 0..map.columns {
+        let sum: f64 = (0..map.rows).map(|k| map.values[k * map.columns + t]).sum();
+        assert!((sum - 1.0).abs() < 1e-9, "frame {t}: {sum}");
+    }
+    let path = dir.join("again.png");
+    map.write_png(&path).unwrap();
+    assert_eq!(std::fs::read(&path).unwrap(), heat);
 
     // An existing PNG is replaced only with --force; any other file is refused even then.
     let stats = |png: &Path, force: bool| {
