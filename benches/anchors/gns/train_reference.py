@@ -339,6 +339,16 @@ def bench_inference(args):
     print(f"inference: {rate:.2f} steps/s ({len(particle_type)} particles, frame {frame}, {device})")
 
 
+def save(model, init_dir, target):
+    """A phi model directory: the --init-from model.json and the weights in phi's layout."""
+    from safetensors.torch import save_file
+
+    target.mkdir(parents=True, exist_ok=True)
+    (target / "model.json").write_text((init_dir / "model.json").read_text())
+    weights = {k: v.detach().to("cpu").contiguous() for k, v in model.state_dict().items()}
+    save_file(weights, str(target / "model.safetensors"))
+
+
 def screen_only(args):
     if not args.init_from:
         sys.exit("error: --screen-only needs --init-from MODEL_DIR")
@@ -374,6 +384,12 @@ def main():
     parser.add_argument("--screen-trajectories", type=int)
     parser.add_argument("--init-from", help="a phi model directory to start from")
     parser.add_argument("--cache-mib", type=int, default=1024)
+    parser.add_argument(
+        "--save-every",
+        type=int,
+        default=0,
+        help="write OUT/step-N/ (phi's model.json from --init-from, model.safetensors) every N steps",
+    )
     parser.add_argument("--bench-inference", type=int, default=0, help="time N one-step predictions")
     parser.add_argument("--bench-frame", type=int, default=200)
     parser.add_argument(
@@ -394,6 +410,8 @@ def main():
         return
     if not args.out:
         sys.exit("error: --out is required for training")
+    if args.save_every > 0 and not args.init_from:
+        sys.exit("error: --save-every needs --init-from (its model.json describes the saved weights)")
     out = pathlib.Path(args.out)
     if out.exists() and any(out.iterdir()):
         sys.exit(f"error: {out}: exists and is not empty")
@@ -425,7 +443,7 @@ def main():
         writer = csv.writer(f)
         writer.writerow(["step", "loss", "learning_rate", "steps_per_second", "valid_mse_acc1", "valid_rollout_mse"])
         sync()
-        interval_start, interval_steps, screen_time = time.perf_counter(), 0, 0.0
+        interval_start, interval_steps = time.perf_counter(), 0
         for step in range(steps):
             lr = learning_rate(rate, step)
             for group in optimizer.param_groups:
@@ -462,7 +480,7 @@ def main():
             done = step + 1
             if done % args.log_every == 0 or done == steps:
                 sync()
-                elapsed = time.perf_counter() - interval_start - screen_time
+                elapsed = time.perf_counter() - interval_start
                 row = [done, loss_sum / loss_count, lr, interval_steps / elapsed, "", ""]
                 if valid is not None and (done % args.screen_every == 0 or done == steps):
                     began = time.perf_counter()
@@ -482,8 +500,10 @@ def main():
                 writer.writerow(row)
                 f.flush()
                 print(f"step {done}: loss {row[1]:.4f}, lr {lr:.2e}, {row[3]:.2f} steps/s", flush=True)
-                loss_sum, loss_count, interval_steps, screen_time = 0.0, 0, 0, 0.0
+                loss_sum, loss_count, interval_steps = 0.0, 0, 0
                 interval_start = time.perf_counter()
+            if args.save_every > 0 and (done % args.save_every == 0 or done == steps):
+                save(model, pathlib.Path(args.init_from), out / f"step-{done:010d}")
 
 
 if __name__ == "__main__":
