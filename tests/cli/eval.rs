@@ -346,6 +346,18 @@ fn the_floors_join_the_table_and_constant_velocity_rolls_out_straight_lines() {
         stdout.contains("misplaced (%)") && stdout.contains("| plausible |"),
         "{stdout}"
     );
+    // The Sinkhorn divergence was switched off: its column reads "–", not a blown-up "inf".
+    let row = stdout
+        .lines()
+        .find(|l| l.starts_with("| constant-velocity |"))
+        .unwrap();
+    assert!(row.contains(" – |") && !row.contains("inf"), "{row}");
+    let csv = std::fs::read_to_string(out.join("table.csv")).unwrap();
+    let row = csv
+        .lines()
+        .find(|l| l.starts_with("constant-velocity,"))
+        .unwrap();
+    assert_eq!(row.split(',').nth(5), Some(""), "{row}");
     let record = json(&out.join("eval.json"));
     let labels: Vec<&str> = record["models"]
         .as_array()

@@ -1009,8 +1009,15 @@ const COLUMNS: [Column; 11] = [
     }),
 ];
 
+/// Whether the column `name` was switched off (the Sinkhorn divergence with
+/// `--sinkhorn-every 0`), so that a missing value means "not measured", not a blown-up rollout.
+fn not_measured(record: &EvalRecord, name: &str) -> bool {
+    name == "sinkhorn" && record.options.sinkhorn_every == 0
+}
+
 /// The markdown table: one row per model, the thesis's four metrics in table B.1's units,
-/// then the extra ones; a rollout that blew up makes its metrics `inf`.
+/// then the extra ones; a rollout that blew up makes its metrics `inf`, a metric switched off
+/// reads `–` (empty in the CSV).
 pub fn markdown_table(record: &EvalRecord) -> String {
     let mut text = String::from("| model |");
     for (header, ..) in COLUMNS {
@@ -1024,9 +1031,10 @@ pub fn markdown_table(record: &EvalRecord) -> String {
             continue;
         };
         text.push_str(&format!("| {} |", model.label));
-        for (_, scale, _, value) in COLUMNS {
+        for (_, scale, name, value) in COLUMNS {
             match value(summary) {
                 Some(v) => text.push_str(&format!(" {:.4} |", v / scale)),
+                None if not_measured(record, name) => text.push_str(" – |"),
                 None => text.push_str(" inf |"),
             }
         }
@@ -1051,7 +1059,7 @@ pub fn markdown_table(record: &EvalRecord) -> String {
 }
 
 /// The CSV table: raw values (stored units², normalised units², fractions), `inf` for a blown-up
-/// rollout.
+/// rollout, empty for a metric switched off.
 pub fn csv_table(record: &EvalRecord) -> String {
     let mut text = String::from("model");
     for (_, _, name, _) in COLUMNS {
@@ -1064,9 +1072,10 @@ pub fn csv_table(record: &EvalRecord) -> String {
             continue;
         };
         text.push_str(&csv_field(&model.label));
-        for (_, _, _, value) in COLUMNS {
+        for (_, _, name, value) in COLUMNS {
             match value(summary) {
                 Some(v) => text.push_str(&format!(",{v:e}")),
+                None if not_measured(record, name) => text.push(','),
                 None => text.push_str(",inf"),
             }
         }
