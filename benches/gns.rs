@@ -50,6 +50,7 @@ fn trajectory() -> Trajectory {
             count: INDEX + 1,
         },
         resume: false,
+        prune: false,
         force: false,
         scenes: TestScenes::builtin(),
         position_scale: None,
