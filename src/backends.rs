@@ -60,6 +60,21 @@ impl BackendKind {
             .into_iter()
             .find(|kind| kind.has_autodiff())
     }
+
+    /// What to pass instead of a backend without autodiff, for the refusals of `train` and
+    /// `optimize`: `--backend burn, burn-wgpu or tch` with the autodiff backends of this build.
+    pub fn autodiff_hint() -> String {
+        let names: Vec<&str> = BackendKind::available()
+            .into_iter()
+            .filter(|kind| kind.has_autodiff())
+            .map(BackendKind::name)
+            .collect();
+        match names.as_slice() {
+            [] => "this build has no backend with autodiff".to_string(),
+            [one] => format!("use --backend {one}"),
+            [rest @ .., last] => format!("use --backend {} or {last}", rest.join(", ")),
+        }
+    }
 }
 
 impl fmt::Display for BackendKind {
@@ -182,6 +197,15 @@ mod tests {
                 crate::with_autodiff_backend!(kind, B => Some(B::name()), otherwise => None);
             assert_eq!(autodiff.is_some(), kind.has_autodiff(), "{kind}");
             assert_eq!(kind.name().parse::<BackendKind>().unwrap(), kind);
+        }
+        // The refusal of a backend without autodiff names exactly this build's autodiff ones.
+        let hint = BackendKind::autodiff_hint();
+        for kind in BackendKind::available() {
+            assert_eq!(
+                hint.contains(&format!(" {}", kind.name())),
+                kind.has_autodiff(),
+                "{kind}: {hint}"
+            );
         }
         let unknown = "numpy".parse::<BackendKind>().unwrap_err().to_string();
         assert!(

@@ -152,7 +152,8 @@ pub fn run(args: OptimizeArgs) -> Result<()> {
         otherwise => {
             let _ = &options;
             Err(anyhow::anyhow!(
-                "the {kind} backend has no autodiff; use --backend burn or tch"
+                "the {kind} backend has no autodiff; {}",
+                BackendKind::autodiff_hint()
             ))
         }
     );

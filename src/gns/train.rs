@@ -152,7 +152,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
             .context("no backend with autodiff is compiled into this build")?,
     };
     crate::with_autodiff_backend!(kind, B => train::<B>(&options, &args.device, &stop),
-        otherwise => bail!("the {kind} backend has no autodiff and cannot train; use --backend burn or tch"))
+        otherwise => bail!("the {kind} backend has no autodiff and cannot train; {}", BackendKind::autodiff_hint()))
 }
 
 /// The devices `--device` takes on a backend of this build, for the message that refuses another.

@@ -368,7 +368,10 @@ fn train_refuses_what_it_cannot_run_and_names_why() {
         &dir.join("nd"),
         &["--backend", "ndarray"],
     ));
-    assert!(e.contains("no autodiff"), "{e}");
+    assert!(
+        e.contains("no autodiff") && e.contains("use --backend burn"),
+        "{e}"
+    );
     let e = stderr(&train(
         &data,
         &preset,
