@@ -245,9 +245,14 @@ fn run_simulate(
     if let Some(device) = device.as_deref().or(scene.run.device.as_deref())
         && device != "cpu"
     {
+        let runs_on = if kind.name() == "burn-wgpu" {
+            "wgpu's default adapter"
+        } else {
+            "the CPU"
+        };
         bail!(
-            "device `{device}` is not available: the {kind} backend of this build runs on the \
-             CPU only (use --device cpu)"
+            "device `{device}` is not available: `phi simulate` runs the {kind} backend on \
+             {runs_on}, whatever the device; pass --device cpu or leave it out"
         );
     }
     println!(

@@ -166,7 +166,11 @@ fn bad_scenes_exit_nonzero_naming_file_and_key() {
         .output()
         .unwrap();
     assert!(!output.status.success());
-    assert!(String::from_utf8_lossy(&output.stderr).contains("cuda"));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("device `cuda`") && stderr.contains("on the CPU"),
+        "{stderr}"
+    );
     let _ = std::fs::remove_dir_all(dir);
 }
 
