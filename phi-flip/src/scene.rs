@@ -256,7 +256,8 @@ fn default_every() -> usize {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct RunSpec {
-    /// `"ndarray"`, `"burn"` or `"tch"`.
+    /// `"ndarray"`, `"burn"`, `"burn-wgpu"` or `"tch"`: the spellings of `--backend` (whether
+    /// this build has it is the front end's to check).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub backend: Option<String>,
     /// `"cpu"` (the CPU backends have no other device).
@@ -614,7 +615,7 @@ impl Scene {
             }
         }
         if let Some(b) = &self.run.backend
-            && !["ndarray", "burn", "tch"].contains(&b.as_str())
+            && !["ndarray", "burn", "burn-wgpu", "tch"].contains(&b.as_str())
         {
             return Err(error(
                 "run.backend".into(),

@@ -387,7 +387,17 @@ steps = 10
 geometry = { type = "box", lower = [0, 0], upper = [16, 4] }
 "#;
     assert!(Scene::from_toml(good, "good.toml").is_ok());
+    // `[run] backend` takes every spelling of `--backend`, and nothing else.
+    for backend in ["ndarray", "burn", "burn-wgpu", "tch"] {
+        let text = format!("[run]\nbackend = \"{backend}\"\n{good}");
+        assert!(Scene::from_toml(&text, "run.toml").is_ok(), "{backend}");
+    }
     let cases = [
+        (
+            format!("[run]\nbackend = \"wgpu\"\n{good}"),
+            "run.backend",
+            "unknown backend",
+        ),
         (
             good.replace("[16, 16]", "[16, 0]"),
             "domain.resolution[1]",
