@@ -313,8 +313,8 @@ pub struct StepStats {
 /// A FLIP liquid simulation on a [`Domain`] with obstacles and inflows, generic over the backend.
 ///
 /// The step is thesis algorithm 1: particles → staggered grid; gravity; pressure projection on the
-/// cells that hold particles, with obstacles, of the velocity extrapolated one layer beyond the
-/// faces the particles reached (as in Φ_Flow); particle velocities updated by FLIP (adding the
+/// cells that hold particles, with obstacles (with the nearest-face transfer, of the velocity
+/// extrapolated one layer beyond the faces the particles reached, as in Φ_Flow); particle velocities updated by FLIP (adding the
 /// grid's velocity change), PIC, a blend or APIC (beyond the thesis: PIC with an affine velocity
 /// matrix per particle, [`FlipParams::apic`]); the grid velocity extrapolated beyond the liquid;
 /// particles advected by RK4 through it; particles pushed out of obstacles and back into the
