@@ -69,6 +69,11 @@ pub struct TrainArgs {
     /// screening.every).
     #[arg(long)]
     pub screen_every: Option<u64>,
+    /// Keep a moving average of the weights with this decay, e.g. 0.999, screened and kept
+    /// in best/ and each checkpoint's average/ (overrides training.ema_decay; may be switched
+    /// on with --resume, starting from the checkpoint's weights).
+    #[arg(long)]
+    pub ema_decay: Option<f64>,
 }
 
 /// The configuration, dataset and preset name of `args`.
@@ -103,6 +108,9 @@ fn resolve(args: &TrainArgs) -> Result<(TrainConfig, PathBuf, String)> {
     }
     if let Some(every) = args.log_every {
         t.log_every = every;
+    }
+    if let Some(decay) = args.ema_decay {
+        t.ema_decay = Some(decay);
     }
     if let Some(sigma) = args.noise_std {
         config.model.noise_std = sigma;

@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+use phi::phi_core::backend::Host;
 use phi::phi_gns::data::Variant;
 
 use super::rollout::tiny_dataset_with;
@@ -32,7 +33,7 @@ steps = {steps}
 batch_size = 2
 seed = 11
 extra_steps = {extra_steps}
-log_every = 2
+log_every = 2{ema}
 
 [optimizer]
 beta1 = 0.9
@@ -67,6 +68,11 @@ read_ahead = 2
             "0.0"
         },
         extra_steps = if extra.contains("two-step") { 1 } else { 0 },
+        ema = if extra.contains("ema") {
+            "\nema_decay = 0.9"
+        } else {
+            ""
+        },
         lr = if extra.contains("diverge") {
             "1e9"
         } else {
@@ -205,7 +211,12 @@ fn a_run_writes_its_log_checkpoints_and_best_model() {
 fn a_stopped_and_resumed_run_has_the_uninterrupted_loss_curve_bit_for_bit() {
     let dir = scratch("train-resume");
     let data = dataset(&dir);
-    for (variant, backend) in [("noise", "burn"), ("two-step", "burn"), ("noise", "tch")] {
+    for (variant, backend) in [
+        ("noise", "burn"),
+        ("two-step", "burn"),
+        ("noise-ema", "burn"),
+        ("noise", "tch"),
+    ] {
         if !phi::backends::BackendKind::available()
             .iter()
             .any(|k| k.name() == backend)
@@ -230,6 +241,23 @@ fn a_stopped_and_resumed_run_has_the_uninterrupted_loss_curve_bit_for_bit() {
             final_weights(&whole, 20),
             "{variant} on {backend}"
         );
+        if variant.contains("ema") {
+            let average = |out: &Path| {
+                std::fs::read(out.join("checkpoints/step-0000000020/average/model.safetensors"))
+                    .unwrap()
+            };
+            assert_eq!(average(&parts), average(&whole), "the weight average");
+            assert_ne!(
+                average(&whole),
+                final_weights(&whole, 20),
+                "the average is not the last step's weights"
+            );
+            assert_eq!(
+                std::fs::read(parts.join("best/model.safetensors")).unwrap(),
+                std::fs::read(whole.join("best/model.safetensors")).unwrap(),
+                "best/ holds the same average"
+            );
+        }
         // A total the run has reached trains nothing and changes nothing.
         let done = ok(resume(&parts, &["--backend", backend, "--steps", "12"]));
         assert!(done.contains("nothing to train"), "{done}");
@@ -401,6 +429,48 @@ fn train_refuses_what_it_cannot_run_and_names_why() {
         &["--config", other.to_str().unwrap(), "--steps", "8"],
     ));
     assert!(e.contains("another configuration"), "{e}");
+    assert!(e.contains("training.ema_decay"), "{e}");
+}
+
+#[test]
+fn a_weight_average_switched_on_at_resume_starts_from_the_checkpoint() {
+    let dir = scratch("train-ema-resume");
+    let data = dataset(&dir);
+    let preset = tiny_preset(&dir, "plain", "noise", 12);
+    let out = dir.join("run");
+    ok(train(&data, &preset, &out, &[]));
+    let state = |step: u64| -> serde_json::Value {
+        let path = out.join(format!("checkpoints/step-{step:010}/state.json"));
+        serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
+    };
+    assert!(state(12).get("average_updates").is_none());
+    assert!(!out.join("checkpoints/step-0000000012/average").exists());
+    ok(resume(&out, &["--steps", "18", "--ema-decay", "0.5"]));
+    assert_eq!(state(18)["average_updates"], 6, "{}", state(18));
+    let stored = std::fs::read_to_string(out.join("config.toml")).unwrap();
+    assert!(stored.contains("ema_decay = 0.5"), "{stored}");
+    // The average of six steps from the weights of step 12 lies between those and step 18's.
+    let weights = |path: &Path| -> Vec<f32> {
+        let model = phi::phi_gns::model::load_model::<Host>(path, &Default::default()).unwrap();
+        model
+            .params()
+            .iter()
+            .flat_map(|(_, t)| t.to_vec())
+            .collect()
+    };
+    let last = weights(&out.join("checkpoints/step-0000000018"));
+    let average = weights(&out.join("checkpoints/step-0000000018/average"));
+    let start = weights(&out.join("checkpoints/step-0000000012"));
+    let moved =
+        |a: &[f32], b: &[f32]| -> f32 { a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum::<f32>() };
+    assert!(moved(&average, &last) > 0.0, "the average lags the weights");
+    assert!(
+        moved(&average, &start) < moved(&last, &start),
+        "the average has moved less than the weights since it started"
+    );
+    // A later resume continues the stored average.
+    ok(resume(&out, &["--steps", "20"]));
+    assert_eq!(state(20)["average_updates"], 8);
 }
 
 #[test]

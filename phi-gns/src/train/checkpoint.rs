@@ -4,7 +4,8 @@
 //! a model directory (`model.json`, `model.safetensors`), Adam's moments
 //! (`optimizer.safetensors`, tensors `exp_avg.{name}` and `exp_avg_sq.{name}` as PyTorch names
 //! them) and `state.json` ([`CheckpointState`]: the step, the seed, the loss accumulated since
-//! the last log row, the best screening result). Because every random draw of a step is a
+//! the last log row, the best screening result, the updates of the weight average) and, when
+//! the run averages its weights, the average as a model directory `average/`. Because every random draw of a step is a
 //! function of the seed and the step (see [`super::sampler::step_rng`]), that is the whole
 //! state of the generators and the sampler.
 //!
@@ -15,9 +16,10 @@
 
 use std::path::{Path, PathBuf};
 
+use phi_core::backend::Host;
 use serde::{Deserialize, Serialize};
 
-use super::{Adam, AdamConfig, TrainError};
+use super::{Adam, AdamConfig, TrainError, WeightAverage};
 use crate::model::files::{tensors_to_bytes, weights_from_bytes};
 use crate::model::{Gns, GnsKernels, Parameters, load_model, save_model};
 
@@ -31,6 +33,8 @@ pub const OPTIMIZER_FILE: &str = "optimizer.safetensors";
 pub const STATE_FILE: &str = "state.json";
 /// What the best model was chosen by, in `best/`.
 pub const BEST_FILE: &str = "best.json";
+/// The weight average of a checkpoint, a model directory.
+pub const AVERAGE_DIR: &str = "average";
 /// The value of [`CheckpointState::format`].
 pub const CHECKPOINT_FORMAT: &str = "phi-gns-checkpoint";
 
@@ -87,6 +91,9 @@ pub struct CheckpointState {
     pub log: LossAccumulator,
     /// The best screening result so far (none before the first screening).
     pub best: Option<Best>,
+    /// The updates of the weight average in `average/` (absent: the run keeps none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub average_updates: Option<u64>,
 }
 
 impl CheckpointState {
@@ -98,6 +105,7 @@ impl CheckpointState {
             seed,
             log,
             best,
+            average_updates: None,
         }
     }
 }
@@ -114,8 +122,9 @@ fn error(path: &Path, reason: impl std::fmt::Display) -> TrainError {
     }
 }
 
-/// Writes the checkpoint of `state.step` into `out` and returns its directory. An existing
-/// checkpoint of the same step is replaced.
+/// Writes the checkpoint of `state.step` into `out` (with `average` in `average/`, its updates
+/// in `state.json`) and returns its directory. An existing checkpoint of the same step is
+/// replaced.
 ///
 /// # Errors
 /// [`TrainError::Checkpoint`] or [`TrainError::Io`] naming the file that cannot be written.
@@ -124,11 +133,18 @@ pub fn save_checkpoint<B: GnsKernels>(
     model: &Gns<B>,
     adam: &Adam<B>,
     state: &CheckpointState,
+    average: Option<&WeightAverage>,
 ) -> Result<PathBuf, TrainError> {
     let dir = checkpoint_dir(out, state.step);
     let temp = temporary_sibling(&dir);
+    let mut state = state.clone();
+    state.average_updates = average.map(WeightAverage::updates);
     write_directory(&temp, &dir, |temp| {
         save_model(temp, model)?;
+        if let Some(average) = average {
+            let averaged = Gns::<Host>::new(model.spec().clone(), average.params().clone())?;
+            save_model(&temp.join(AVERAGE_DIR), &averaged)?;
+        }
         let path = temp.join(OPTIMIZER_FILE);
         let (first, second) = adam.moments();
         let named = first
@@ -137,9 +153,39 @@ pub fn save_checkpoint<B: GnsKernels>(
             .chain(second.iter().map(|(n, t)| (format!("exp_avg_sq.{n}"), t)));
         let bytes = tensors_to_bytes(named, &path)?;
         phi_io::write_atomic(&path, |w| phi_io::write_all(w, &bytes, &path))?;
-        write_json(&temp.join(STATE_FILE), state)
+        write_json(&temp.join(STATE_FILE), &state)
     })?;
     Ok(dir)
+}
+
+/// The weight average of the checkpoint in `dir` with decay `decay`, if it holds one.
+///
+/// # Errors
+/// [`TrainError::Checkpoint`] when `state.json` counts updates but `average/` is missing or
+/// damaged, or does not fit `model`.
+pub fn load_average<B: GnsKernels>(
+    dir: &Path,
+    state: &CheckpointState,
+    model: &Gns<B>,
+    decay: f64,
+) -> Result<Option<WeightAverage>, TrainError> {
+    let Some(updates) = state.average_updates else {
+        return Ok(None);
+    };
+    let path = dir.join(AVERAGE_DIR);
+    let average = load_model::<Host>(&path, &Default::default())
+        .map_err(|e| error(&path, format!("the weight average: {e}")))?;
+    if average.spec().config != model.spec().config {
+        return Err(error(
+            &path,
+            "the weight average's model.json does not fit the checkpoint's model",
+        ));
+    }
+    Ok(Some(WeightAverage::restore(
+        decay,
+        average.params().clone(),
+        updates,
+    )))
 }
 
 /// The model, Adam's state (with `adam` as its constants) and the state of the checkpoint in

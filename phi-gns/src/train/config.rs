@@ -101,6 +101,13 @@ pub struct TrainingSection {
     /// the last) with probability ½, which maps a scene to a scene (default off).
     #[serde(default, skip_serializing_if = "is_false")]
     pub mirror: bool,
+    /// `d` of a moving average of the weights ([`super::WeightAverage`], e.g. 0.999): when
+    /// set, screening, `best/` and each checkpoint's `average/` hold the averaged weights,
+    /// while training goes on from the weights of the last step (absent: no average). The
+    /// one key besides `steps` that `--resume` lets change: an average switched on then
+    /// starts from the checkpoint's weights.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ema_decay: Option<f64>,
 }
 
 fn is_false(value: &bool) -> bool {
@@ -261,6 +268,11 @@ impl TrainConfig {
             if !(delta.is_finite() && delta > 0.0) {
                 return fail("training.huber_delta", format!("{delta} is not > 0"));
             }
+        }
+        if let Some(d) = t.ema_decay
+            && !(d > 0.0 && d < 1.0)
+        {
+            return fail("training.ema_decay", format!("{d} is not in (0, 1)"));
         }
         if let Some(p) = &t.pushforward {
             p.validate(Path::new(origin), "training.pushforward")
@@ -488,6 +500,28 @@ mod tests {
         assert_eq!(TrainConfig::from_toml(&c.to_toml(), "stored").unwrap(), c);
         let e = refusal(&text.replace("log_every = 100", "log_every = 100\nmirror = 1"));
         assert!(e.contains("mirror"), "{e}");
+    }
+
+    #[test]
+    fn the_weight_average_is_off_unless_asked_and_its_decay_is_checked() {
+        let text = preset();
+        let plain = TrainConfig::from_toml(&text, "preset.toml").unwrap();
+        assert_eq!(plain.training.ema_decay, None);
+        assert!(!plain.to_toml().contains("ema_decay"));
+        let on = text.replace("log_every = 100", "log_every = 100\nema_decay = 0.999");
+        let c = TrainConfig::from_toml(&on, "preset.toml").unwrap();
+        assert_eq!(c.training.ema_decay, Some(0.999));
+        assert_eq!(TrainConfig::from_toml(&c.to_toml(), "stored").unwrap(), c);
+        for bad in ["1.0", "0.0", "-0.5", "1.5"] {
+            let e = refusal(&text.replace(
+                "log_every = 100",
+                &format!("log_every = 100\nema_decay = {bad}"),
+            ));
+            assert!(
+                e.contains("training.ema_decay") && e.contains("(0, 1)"),
+                "{bad}: {e}"
+            );
+        }
     }
 
     #[test]

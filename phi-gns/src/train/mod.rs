@@ -9,11 +9,15 @@
 //! - [`pushforward`]: LagrangeBench's pushforward training, a one-step loss after unrolled
 //!   steps without gradient, and its schedule.
 //!
+//! - [`average`]: a moving average of the weights over the steps, screened and kept instead
+//!   of the weights of one step.
+//!
 //! [`train_step`] and [`train_step_with`] take one Adam step on a loss. A whole run, with its
 //! presets ([`config`]), checkpoints ([`checkpoint`]), screening on the validation split
 //! ([`screening`]) and files, is [`run::TrainingRun`]; `phi train` drives it.
 
 pub mod adam;
+pub mod average;
 pub mod cache;
 pub mod checkpoint;
 pub mod config;
@@ -29,6 +33,7 @@ pub mod screening;
 pub mod stream;
 
 pub use adam::{Adam, AdamConfig, LearningRate};
+pub use average::WeightAverage;
 pub use config::TrainConfig;
 pub use error::TrainError;
 pub use loss::{ErrorNorm, acceleration_loss, non_kinematic_mask, one_step_loss};

@@ -12,6 +12,10 @@
 //! - `checkpoints/step-…/`: the newest `checkpoints.keep` checkpoints ([`super::checkpoint`]);
 //! - `best/`: the model with the best screening metric so far.
 //!
+//! With `training.ema_decay`, the run keeps a moving average of its weights
+//! ([`super::WeightAverage`]): screening reads the average, `best/` holds it, and each
+//! checkpoint holds it as `average/` beside the weights training continues from.
+//!
 //! Each step `s` draws its windows, its noise and its pushforward unroll from generators that
 //! depend only on `(training.seed, s)`, so a run resumed from the checkpoint at step `s`
 //! ([`TrainingRun::open`] with `resume`) computes exactly the losses an uninterrupted run
@@ -28,8 +32,8 @@ use phi_core::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
 use super::checkpoint::{
-    Best, CheckpointState, LossAccumulator, checkpoints, load_checkpoint, prune_checkpoints,
-    save_best, save_checkpoint,
+    Best, CheckpointState, LossAccumulator, checkpoints, load_average, load_checkpoint,
+    prune_checkpoints, save_best, save_checkpoint,
 };
 use super::config::{SelectBy, TrainConfig};
 use super::rng::{RngStream, step_rng};
@@ -37,8 +41,8 @@ use super::sampler::WindowSpec;
 use super::screening::{Screening, screen};
 use super::stream::{BatchConfig, BatchSource, BatchStream, HostBatch};
 use super::{
-    Adam, ErrorNorm, TrainError, multi_step_loss, non_kinematic_mask, pushforward_loss,
-    random_walk_noise, train_step_with,
+    Adam, ErrorNorm, TrainError, WeightAverage, multi_step_loss, non_kinematic_mask,
+    pushforward_loss, random_walk_noise, train_step_with,
 };
 use crate::data::{Dataset, METADATA_FILE, Trajectory};
 use crate::model::{Gns, GnsKernels, GraphBatch, ModelError, load_model};
@@ -107,6 +111,7 @@ pub struct TrainingRun<B: AutodiffBackend + GnsKernels> {
     config: TrainConfig,
     model: Gns<B>,
     adam: Adam<B>,
+    average: Option<WeightAverage>,
     state: CheckpointState,
     stream: BatchStream,
     valid: Vec<Trajectory>,
@@ -142,7 +147,7 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
         } else {
             check_fresh(out)?;
         }
-        let (model, adam, state) = if options.resume {
+        let (model, adam, state, average) = if options.resume {
             let (step, dir) = checkpoints(out)?
                 .pop()
                 .ok_or_else(|| TrainError::Checkpoint {
@@ -157,8 +162,18 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
                 });
             }
             tracing::info!(step, checkpoint = %dir.display(), "resuming");
+            let average = match config.training.ema_decay {
+                Some(decay) => Some(match load_average(&dir, &state, &model, decay)? {
+                    Some(average) => average,
+                    None => {
+                        tracing::info!(step, "the weight average starts from this checkpoint");
+                        WeightAverage::new(decay, model.params())
+                    }
+                }),
+                None => None,
+            };
             truncate_log(&out.join(LOG_FILE), state.step)?;
-            (model, adam, state)
+            (model, adam, state, average)
         } else {
             let model = match &options.init_from {
                 Some(dir) => start_from(dir, spec, device)?,
@@ -167,7 +182,11 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
             let adam = Adam::new(config.optimizer, model.params());
             let state =
                 CheckpointState::new(0, config.training.seed, LossAccumulator::default(), None);
-            (model, adam, state)
+            let average = config
+                .training
+                .ema_decay
+                .map(|decay| WeightAverage::new(decay, model.params()));
+            (model, adam, state, average)
         };
         let window = WindowSpec {
             input_velocities: config.model.input_velocities,
@@ -197,6 +216,7 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
             config: config.clone(),
             model,
             adam,
+            average,
             state,
             stream,
             valid,
@@ -224,6 +244,11 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
     /// The configuration.
     pub fn config(&self) -> &TrainConfig {
         &self.config
+    }
+
+    /// The moving average of the weights, if the run keeps one.
+    pub fn average(&self) -> Option<&WeightAverage> {
+        self.average.as_ref()
     }
 
     /// The best screening result so far.
@@ -267,6 +292,9 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
             Err(e) => return Err(e.into()),
         };
         self.model = model;
+        if let Some(average) = &mut self.average {
+            average.update(self.model.params());
+        }
         self.state.step = step + 1;
         self.state.log.add(loss);
         self.log_steps += 1;
@@ -292,16 +320,18 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
         })
     }
 
-    /// Screens the model of the moment on the validation trajectories (on the host backend)
-    /// and keeps it as `best/` when it beats the best so far.
+    /// Screens the model of the moment (the weight average, if the run keeps one) on the
+    /// validation trajectories (on the host backend) and keeps it as `best/` when it beats the
+    /// best so far.
     ///
     /// # Errors
     /// As [`screen`]; file errors writing `best/`.
     pub fn screen(&mut self) -> Result<Screening, TrainError> {
-        let host = Gns::<Host>::new(
-            self.model.spec().clone(),
-            self.model.params().to_backend::<Host>(&Default::default()),
-        )?;
+        let weights = match &self.average {
+            Some(average) => average.params().clone(),
+            None => self.model.params().to_backend::<Host>(&Default::default()),
+        };
+        let host = Gns::<Host>::new(self.model.spec().clone(), weights)?;
         let s = &self.config.screening;
         let result = screen(
             &host,
@@ -325,7 +355,7 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
                 step: self.state.step,
                 value,
             };
-            save_best(&self.out, &self.model, &best, metric)?;
+            save_best(&self.out, &host, &best, metric)?;
             self.state.best = Some(best);
         }
         Ok(result)
@@ -337,7 +367,13 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
     /// # Errors
     /// File errors.
     pub fn checkpoint(&mut self) -> Result<PathBuf, TrainError> {
-        let dir = save_checkpoint(&self.out, &self.model, &self.adam, &self.state)?;
+        let dir = save_checkpoint(
+            &self.out,
+            &self.model,
+            &self.adam,
+            &self.state,
+            self.average.as_ref(),
+        )?;
         prune_checkpoints(&self.out, self.config.checkpoints.keep)?;
         tracing::debug!(step = self.state.step, dir = %dir.display(), "checkpoint");
         Ok(dir)
@@ -599,11 +635,12 @@ fn check_resumable(
     let stored = TrainConfig::from_file(&stored_path)?;
     let mut same_steps = config.clone();
     same_steps.training.steps = stored.training.steps;
+    same_steps.training.ema_decay = stored.training.ema_decay;
     if same_steps != stored {
         return Err(checkpoint_error(
             &stored_path,
-            "the run was made with another configuration (only training.steps may change on \
-             --resume)",
+            "the run was made with another configuration (only training.steps and \
+             training.ema_decay may change on --resume)",
         ));
     }
     if record.backend != backend {
@@ -620,7 +657,7 @@ fn check_resumable(
             "resuming on a dataset path other than the run's"
         );
     }
-    if config.training.steps != stored.training.steps {
+    if *config != stored {
         let text = config.to_toml();
         phi_io::write_atomic(&stored_path, |w| {
             phi_io::write_all(w, text.as_bytes(), &stored_path)
