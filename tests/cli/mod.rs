@@ -10,6 +10,7 @@ mod dataset;
 mod dataset_faults;
 mod eval;
 mod faults;
+mod learning;
 mod optimize;
 mod rollout;
 mod train;
