@@ -7,6 +7,7 @@
 //! - [`phi_gns`]: Graph Network-based Simulators.
 
 pub mod backends;
+pub mod cli;
 pub mod dataset;
 pub mod demo;
 pub mod gns;

@@ -22,27 +22,34 @@ pub enum DatasetCommand {
     /// Join shard directories into one dataset and write its metadata.json.
     Merge {
         /// The dataset directory to write.
-        out: PathBuf,
-        /// The shard directories (`phi dataset generate --shard k/n`).
-        #[arg(required = true)]
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// The shard directories (`phi dataset generate --shard k/n`). Without --out, the first
+        /// is the dataset to write (`merge OUT SHARDS...`, deprecated: pass --out).
+        #[arg(required = true, value_name = "SHARDS")]
         shards: Vec<PathBuf>,
-        /// Replace a dataset in OUT (a folder holding anything else is refused even then).
+        /// Replace a dataset in --out (a folder holding anything else is refused even then).
         #[arg(long)]
         force: bool,
     },
     /// Particle counts and the neighbour-count distribution over time (thesis fig. 5.4).
     Stats {
-        /// The dataset directory.
-        dir: PathBuf,
-        /// The split (default: train if present).
-        #[arg(long)]
+        /// The dataset directory (a positional DATA, the form before --data, is deprecated).
+        #[arg(long, required_unless_present = "data_positional")]
+        data: Option<PathBuf>,
+        /// Deprecated: the dataset directory; pass --data.
+        #[arg(hide = true, value_name = "DATA")]
+        data_positional: Option<PathBuf>,
+        /// The split: train, valid, test, or another its metadata.json lists [default: train
+        /// if present, else the first listed].
+        #[arg(long, value_name = "SPLIT", value_parser = crate::cli::parse_split)]
         split: Option<String>,
         /// Connectivity radius in stored units.
         #[arg(long, default_value_t = 0.03)]
         radius: f32,
-        /// Measure the first this many trajectories.
-        #[arg(long, default_value_t = 50)]
-        limit: usize,
+        /// Measure the first this many trajectories (--limit before, deprecated).
+        #[arg(long, alias = "limit", default_value_t = 50)]
+        trajectories: usize,
         /// Draw the distribution over time into this PNG, and as a heat map into
         /// {stem}_heatmap.png beside it.
         #[arg(long)]
@@ -58,8 +65,12 @@ pub enum DatasetCommand {
     /// `tfrecord` (DeepMind learning_to_simulate), `gns` (geoelements/gns) or `lagrangebench`
     /// (LagrangeBench's HDF5, written through Python's h5py). docs/datasets.md describes each.
     Export {
-        /// The dataset directory.
-        dir: PathBuf,
+        /// The dataset directory (a positional DATA, the form before --data, is deprecated).
+        #[arg(long, required_unless_present = "data_positional")]
+        data: Option<PathBuf>,
+        /// Deprecated: the dataset directory; pass --data.
+        #[arg(hide = true, value_name = "DATA")]
+        data_positional: Option<PathBuf>,
         /// The format to write.
         #[arg(long)]
         format: ExportFormat,
@@ -76,8 +87,13 @@ pub enum DatasetCommand {
     /// Read DeepMind learning_to_simulate's TFRecord files (`{split}.tfrecord` and
     /// metadata.json) into a phi dataset directory.
     Import {
-        /// The directory holding the TFRecord files and metadata.json.
-        input: PathBuf,
+        /// The directory holding the TFRecord files and metadata.json (a positional DATA, the
+        /// form before --data, is deprecated).
+        #[arg(long, required_unless_present = "data_positional")]
+        data: Option<PathBuf>,
+        /// Deprecated: the TFRecord directory; pass --data.
+        #[arg(hide = true, value_name = "DATA")]
+        data_positional: Option<PathBuf>,
         /// The dataset directory to write (absent or empty, unless --force).
         #[arg(long)]
         out: PathBuf,
@@ -109,9 +125,10 @@ pub struct GenerateArgs {
     /// The split to make.
     #[arg(long, value_enum, default_value_t = SplitChoice::All)]
     pub split: SplitChoice,
-    /// Trajectories per split (default: train 2000, valid 20, test 10; test has at most 10).
-    #[arg(long)]
-    pub count: Option<usize>,
+    /// Trajectories per split (default: train 2000, valid 20, test 10; test has at most 10;
+    /// --count before, deprecated).
+    #[arg(long, alias = "count")]
+    pub trajectories: Option<usize>,
     /// The dataset seed; each split and trajectory derives its own from it.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -133,12 +150,12 @@ pub struct GenerateArgs {
     /// Continue in a directory whose generator.json differs or is missing.
     #[arg(long)]
     pub resume: bool,
-    /// Delete trajectory files beyond --count instead of refusing to run.
+    /// Delete trajectory files beyond --trajectories instead of refusing to run.
     #[arg(long)]
     pub prune: bool,
     /// Replace a dataset this command wrote in --out: its files are removed and every
     /// trajectory made again (a folder holding anything else is refused even then). Before,
-    /// --force deleted only the trajectories beyond --count: that is --prune now.
+    /// --force deleted only the trajectories beyond --trajectories: that is --prune now.
     #[arg(long, conflicts_with = "resume")]
     pub force: bool,
     /// Make the test split from the scene files (*.toml) of this folder, in name order, instead
@@ -155,21 +172,26 @@ pub struct GenerateArgs {
 /// `phi render`.
 #[derive(Debug, Args)]
 pub struct RenderArgs {
-    /// The dataset directory.
-    pub dataset: PathBuf,
-    /// The split.
-    #[arg(long, default_value = "test")]
+    /// The dataset directory (a positional DATA, the form before --data, is deprecated).
+    #[arg(long, required_unless_present = "data_positional")]
+    pub data: Option<PathBuf>,
+    /// Deprecated: the dataset directory; pass --data.
+    #[arg(hide = true, value_name = "DATA")]
+    pub data_positional: Option<PathBuf>,
+    /// The split: train, valid, test, or another its metadata.json lists.
+    #[arg(long, default_value = "test", value_name = "SPLIT", value_parser = crate::cli::parse_split)]
     pub split: String,
-    /// The trajectory's index in the split.
-    #[arg(long, default_value_t = 0)]
-    pub index: usize,
+    /// The trajectory's index in the split (--index before, deprecated).
+    #[arg(long, alias = "index", value_name = "I", default_value_t = 0)]
+    pub trajectory: usize,
     /// The GIF to write.
     #[arg(long)]
     pub out: PathBuf,
     /// Pixels per grid cell.
     #[arg(long, default_value_t = 8)]
     pub pixels_per_cell: u32,
-    /// Draw every this many frames.
+    /// Draw every this many frames of the trajectory. The default, 2, keeps the GIF of a
+    /// 400-frame trajectory to 200 pictures (a few MB); 1 draws every frame.
     #[arg(long, default_value_t = 2)]
     pub frame_every: usize,
     /// Replace an existing GIF --out (any other file is refused even then).
@@ -185,6 +207,7 @@ pub fn run(command: DatasetCommand) -> Result<()> {
     match command {
         DatasetCommand::Generate(args) => run_generate(args),
         DatasetCommand::Merge { out, shards, force } => {
+            let (out, shards) = merge_paths(out, shards)?;
             let summary = merge(&out, &shards, force)?;
             println!(
                 "merged {} shard(s) into {}: {}",
@@ -200,19 +223,21 @@ pub fn run(command: DatasetCommand) -> Result<()> {
             Ok(())
         }
         DatasetCommand::Stats {
-            dir,
+            data,
+            data_positional,
             split,
             radius,
-            limit,
+            trajectories,
             out,
             force,
             print_every,
         } => {
+            let dir = crate::cli::dataset_dir("phi dataset stats", data, data_positional)?;
             let report = dataset_stats(&StatsOptions {
                 dir: dir.clone(),
                 split,
                 radius,
-                limit,
+                limit: trajectories,
                 out: out.clone(),
                 force,
                 progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
@@ -228,12 +253,14 @@ pub fn run(command: DatasetCommand) -> Result<()> {
             Ok(())
         }
         DatasetCommand::Export {
-            dir,
+            data,
+            data_positional,
             format,
             out,
             force,
             python,
         } => {
+            let dir = crate::cli::dataset_dir("phi dataset export", data, data_positional)?;
             if let (Ok(data), Ok(target)) = (dir.canonicalize(), out.canonicalize())
                 && data.starts_with(&target)
             {
@@ -272,7 +299,13 @@ pub fn run(command: DatasetCommand) -> Result<()> {
             }
             Ok(())
         }
-        DatasetCommand::Import { input, out, force } => {
+        DatasetCommand::Import {
+            data,
+            data_positional,
+            out,
+            force,
+        } => {
+            let input = crate::cli::dataset_dir("phi dataset import", data, data_positional)?;
             let staging = prepare_output(&out, force)?;
             let imported = (|| -> Result<()> {
                 let bar = crate::progress::counter(
@@ -301,6 +334,29 @@ pub fn run(command: DatasetCommand) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// The dataset to write and the shards of `phi dataset merge`: `--out` and every positional
+/// path, or, without `--out`, the first positional path and the others (the form before `--out`,
+/// deprecated). With `--out`, every positional path is a shard, so that `--out A A B` is refused
+/// as a merge into shard A, not taken for the two forms at once.
+fn merge_paths(out: Option<PathBuf>, mut shards: Vec<PathBuf>) -> Result<(PathBuf, Vec<PathBuf>)> {
+    if let Some(out) = out {
+        return Ok((out, shards));
+    }
+    if shards.len() < 2 {
+        bail!(
+            "no dataset to write: pass --out DIR and the shard directories \
+             (`phi dataset merge --out DIR SHARDS...`)"
+        );
+    }
+    let out = shards.remove(0);
+    tracing::warn!(
+        "`phi dataset merge OUT SHARDS...` is deprecated and goes in the next release: pass \
+         --out {}",
+        out.display()
+    );
+    Ok((out, shards))
 }
 
 /// Checks that the directory `out` of a command that writes a whole directory may be written
@@ -386,7 +442,7 @@ fn run_generate(args: GenerateArgs) -> Result<()> {
     let options = GenerateOptions {
         out: args.out,
         splits,
-        count: args.count,
+        count: args.trajectories,
         seed: args.seed,
         variant: args.variant,
         params,
@@ -438,10 +494,11 @@ fn run_generate(args: GenerateArgs) -> Result<()> {
 /// # Errors
 /// A missing dataset or trajectory, I/O errors.
 pub fn render(args: RenderArgs) -> Result<()> {
+    let data = crate::cli::dataset_dir("phi render", args.data, args.data_positional)?;
     let pictures = render_trajectory(
-        &args.dataset,
+        &data,
         &args.split,
-        args.index,
+        args.trajectory,
         &args.out,
         args.pixels_per_cell,
         args.frame_every,

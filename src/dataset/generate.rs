@@ -9,7 +9,8 @@
 //! file. `generator.json`, written before the first trajectory, records the configuration, so
 //! a directory holding another configuration's files is refused (unless `--resume`).
 //! `--force` replaces a dataset this command wrote ([`GENERATE_OUTPUTS`]): its files are removed
-//! and every trajectory made again; `--prune` deletes only the trajectories beyond `--count`.
+//! and every trajectory made again; `--prune` deletes only the trajectories beyond
+//! `--trajectories`.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -144,7 +145,7 @@ pub fn generate(options: &GenerateOptions) -> Result<GenerateSummary> {
             "{} trajectories ({})",
             jobs_asked,
             if options.count.is_some() {
-                "--count"
+                "--trajectories"
             } else {
                 "the counts of generator.json"
             }
@@ -161,8 +162,8 @@ pub fn generate(options: &GenerateOptions) -> Result<GenerateSummary> {
         let last = beyond.iter().map(|b| b.1).max().unwrap_or(*index);
         bail!(
             "{} holds {split}/{} beyond the {count} {split} trajectories asked for ({} such \
-             file(s)); pass --count {} or more to keep and extend them, --prune to delete them, \
-             or --force to replace the whole dataset",
+             file(s)); pass --trajectories {} or more to keep and extend them, --prune to \
+             delete them, or --force to replace the whole dataset",
             out.display(),
             trajectory_file_name(*index),
             beyond.len(),

@@ -133,10 +133,10 @@ pub fn render_trajectory(
     check_file(out, &RENDER_OUTPUT, force)?;
     let dataset = Dataset::open(dir)?;
     let metadata = dataset.metadata();
-    let count = dataset.split_len(split)?;
+    let count = crate::cli::split_len(&dataset, dir, split)?;
     if index >= count {
         bail!(
-            "{}: split {split} has {count} trajectories, no index {index}",
+            "{}: --trajectory {index}: split {split} has {count} trajectories, no index {index}",
             dir.display()
         );
     }

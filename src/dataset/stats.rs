@@ -126,7 +126,7 @@ pub fn dataset_stats(options: &StatsOptions) -> Result<StatsReport> {
             .cloned()
             .with_context(|| format!("{} lists no split", options.dir.display()))?,
     };
-    let available = dataset.split_len(&split)?;
+    let available = crate::cli::split_len(&dataset, &options.dir, &split)?;
     let count = available.min(options.limit.max(1));
     let frames = metadata.frames();
     // The cell list of each worker (two arrays of one usize per cell) and the histograms of every

@@ -69,12 +69,12 @@ pub struct RolloutArgs {
     /// The dataset directory.
     #[arg(long)]
     pub data: PathBuf,
-    /// The split of the trajectories.
-    #[arg(long, default_value = "test")]
+    /// The split of the trajectories: train, valid, test, or another its metadata.json lists.
+    #[arg(long, default_value = "test", value_name = "SPLIT", value_parser = crate::cli::parse_split)]
     pub split: String,
-    /// The trajectory's index in the split [default: 0].
-    #[arg(long, conflicts_with = "all")]
-    pub index: Option<usize>,
+    /// The trajectory's index in the split [default: 0] (--index before, deprecated).
+    #[arg(long, alias = "index", value_name = "I", conflicts_with = "all")]
+    pub trajectory: Option<usize>,
     /// Roll out every trajectory of the split.
     #[arg(long)]
     pub all: bool,
@@ -98,7 +98,9 @@ pub struct RolloutArgs {
     /// Rewrite rollout.npz and rollout.json every this many steps (0: only at the end).
     #[arg(long, default_value_t = 25)]
     pub checkpoint_every: usize,
-    /// A GIF picture every this many steps (0: no GIF).
+    /// A GIF picture every this many steps (0: no GIF). The default, 1, shows every predicted
+    /// step, where the prediction starts to leave the truth; `phi render` and `phi eval` draw
+    /// every 2nd frame to keep their GIFs small.
     #[arg(long, default_value_t = 1)]
     pub frame_every: usize,
     /// Pixels per grid cell in the GIF.
@@ -207,7 +209,7 @@ pub fn plan(args: &RolloutArgs) -> Result<Plan> {
         &args.data.join(METADATA_FILE),
         args.bounds,
     )?;
-    let count = dataset.split_len(&args.split)?;
+    let count = crate::cli::split_len(&dataset, &args.data, &args.split)?;
     let indices: Vec<usize> = if args.all {
         if count == 0 {
             bail!(
@@ -218,10 +220,10 @@ pub fn plan(args: &RolloutArgs) -> Result<Plan> {
         }
         (0..count).collect()
     } else {
-        let index = args.index.unwrap_or(0);
+        let index = args.trajectory.unwrap_or(0);
         if index >= count {
             bail!(
-                "{}: --index {index}: split '{}' has {count} trajectories{}",
+                "{}: --trajectory {index}: split '{}' has {count} trajectories{}",
                 args.data.display(),
                 args.split,
                 match count {

@@ -24,7 +24,7 @@ fn generate(out: &Path, extra: &[&str]) -> Output {
     command
         .args(["dataset", "generate", "--out"])
         .arg(out)
-        .args(["--steps", "5", "--count", "3"])
+        .args(["--steps", "5", "--trajectories", "3"])
         .args(extra);
     command.output().unwrap()
 }
@@ -144,7 +144,7 @@ fn merged_shards_equal_an_unsharded_run() {
     );
     let merged = dir.join("merged");
     // A missing shard is an error naming the trajectory, and nothing is written.
-    let output = run(&["dataset", "merge"], &[&merged, &a]);
+    let output = run(&["dataset", "merge", "--out"], &[&merged, &a]);
     assert!(!output.status.success());
     assert!(String::from_utf8_lossy(&output.stderr).contains("traj_00001.npz"));
     assert!(
@@ -152,7 +152,7 @@ fn merged_shards_equal_an_unsharded_run() {
         "a failed merge wrote into {}",
         merged.display()
     );
-    ok(run(&["dataset", "merge"], &[&merged, &a, &b]));
+    ok(run(&["dataset", "merge", "--out"], &[&merged, &a, &b]));
     assert_eq!(files(&whole), files(&merged));
     let (mw, mm) = (
         read_metadata(&whole).unwrap(),
@@ -166,13 +166,13 @@ fn merged_shards_equal_an_unsharded_run() {
     // Shards of another configuration do not merge.
     let c = dir.join("c");
     ok(generate(&c, &["--shard", "1/2"]));
-    let output = run(&["dataset", "merge"], &[&dir.join("m2"), &a, &c]);
+    let output = run(&["dataset", "merge", "--out"], &[&dir.join("m2"), &a, &c]);
     assert!(!output.status.success());
     assert!(String::from_utf8_lossy(&output.stderr).contains("variant"));
     let _ = std::fs::remove_dir_all(dir);
 }
 
-/// `phi dataset merge` writes a new or empty OUT; it replaces a dataset there only with
+/// `phi dataset merge` writes a new or empty --out; it replaces a dataset there only with
 /// `--force`, and refuses a folder holding anything else, or a shard itself, even then.
 #[test]
 fn merge_replaces_a_dataset_only_with_force() {
@@ -182,10 +182,10 @@ fn merge_replaces_a_dataset_only_with_force() {
     ok(generate(&b, &["--split", "train", "--shard", "1/2"]));
     let merged = dir.join("merged");
     std::fs::create_dir_all(&merged).unwrap();
-    ok(run(&["dataset", "merge"], &[&merged, &a, &b]));
+    ok(run(&["dataset", "merge", "--out"], &[&merged, &a, &b]));
     let before = files(&merged);
     let metadata = std::fs::read(merged.join("metadata.json")).unwrap();
-    let stderr = failed(run(&["dataset", "merge"], &[&merged, &a, &b]));
+    let stderr = failed(run(&["dataset", "merge", "--out"], &[&merged, &a, &b]));
     assert!(
         stderr.contains("merged") && stderr.contains("--force"),
         "{stderr}"
@@ -197,7 +197,10 @@ fn merge_replaces_a_dataset_only_with_force() {
         merged.join("train/traj_00009.npz"),
     )
     .unwrap();
-    ok(run(&["dataset", "merge", "--force"], &[&merged, &a, &b]));
+    ok(run(
+        &["dataset", "merge", "--force", "--out"],
+        &[&merged, &a, &b],
+    ));
     assert_eq!(files(&merged), before);
     assert_eq!(
         std::fs::read(merged.join("metadata.json")).unwrap(),
@@ -211,7 +214,7 @@ fn merge_replaces_a_dataset_only_with_force() {
         std::fs::write(other.join(foreign), "mine").unwrap();
         for force in [&[][..], &["--force"][..]] {
             let stderr = failed(run(
-                &[&["dataset", "merge"], force].concat(),
+                &[&["dataset", "merge"], force, &["--out"]].concat(),
                 &[&other, &a, &b],
             ));
             assert!(
@@ -223,7 +226,10 @@ fn merge_replaces_a_dataset_only_with_force() {
         assert!(!other.join("metadata.json").exists());
     }
     let shard = files(&a);
-    let stderr = failed(run(&["dataset", "merge", "--force"], &[&a, &a, &b]));
+    let stderr = failed(run(
+        &["dataset", "merge", "--force", "--out"],
+        &[&a, &a, &b],
+    ));
     assert!(stderr.contains("is the shard"), "{stderr}");
     assert_eq!(files(&a), shard);
     let _ = std::fs::remove_dir_all(dir);
@@ -277,7 +283,11 @@ fn a_bad_config_key_names_the_file_and_the_key() {
     let data = dir.join("data");
     ok(run(
         &[
-            "dataset", "generate", "--split", "train", "--count", "2", "--out",
+            "dataset",
+            "generate",
+            "--split=train",
+            "--trajectories=2",
+            "--out",
         ],
         &[&data, Path::new("--config"), &config],
     ));
@@ -298,13 +308,13 @@ fn render_writes_a_gif_and_stats_a_png() {
             "render",
             "--split",
             "test",
-            "--index",
+            "--trajectory",
             "1",
             "--frame-every",
             "1",
             "--out",
         ],
-        &[&gif, &out],
+        &[&gif, Path::new("--data"), &out],
     ));
     assert!(stdout.contains("6 pictures"), "{stdout}");
     assert_eq!(&std::fs::read(&gif).unwrap()[..6], b"GIF89a");
@@ -312,7 +322,7 @@ fn render_writes_a_gif_and_stats_a_png() {
     let png = dir.join("n.png");
     let stdout = ok(run(
         &["dataset", "stats", "--split", "test", "--out"],
-        &[&png, &out],
+        &[&png, Path::new("--data"), &out],
     ));
     assert!(stdout.contains("3 of 3 trajectories"), "{stdout}");
     assert!(stdout.contains("liquid    particles: min"), "{stdout}");
@@ -352,7 +362,7 @@ fn render_writes_a_gif_and_stats_a_png() {
         let force: &[&str] = if force { &["--force"] } else { &[] };
         run(
             &[&["dataset", "stats", "--split", "test"], force, &["--out"]].concat(),
-            &[png, &out],
+            &[png, Path::new("--data"), &out],
         )
     };
     std::fs::write(&png, b"\x89PNG\r\n\x1a\n old").unwrap();
@@ -416,18 +426,21 @@ fn export_to_tfrecord_and_npz_and_import_back() {
     let records = dir.join("records");
     ok(run(
         &["dataset", "export", "--format", "tfrecord", "--out"],
-        &[&records, &data],
+        &[&records, Path::new("--data"), &data],
     ));
     assert!(records.join("train.tfrecord").is_file());
     let back = dir.join("back");
-    ok(run(&["dataset", "import", "--out"], &[&back, &records]));
+    ok(run(
+        &["dataset", "import", "--out"],
+        &[&back, Path::new("--data"), &records],
+    ));
     assert_eq!(files(&data), files(&back));
     Dataset::open(&back).unwrap();
 
     let arrays = dir.join("arrays");
     ok(run(
         &["dataset", "export", "--format", "npz", "--out"],
-        &[&arrays, &data],
+        &[&arrays, Path::new("--data"), &data],
     ));
     let exported = phi::output::read_npz(arrays.join("train.npz")).unwrap();
     let original = read_trajectory(&data.join("train/traj_00001.npz")).unwrap();
@@ -522,5 +535,106 @@ fn a_test_split_from_scene_files_keeps_the_thesis_scale_on_a_taller_domain() {
     ));
     assert!(stderr.contains("--position-scale"), "{stderr}");
     assert!(!dir.join("mixed").exists() && !dir.join("scale").exists());
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// The spellings before one vocabulary across commands work for one release, with a warning:
+/// the positional dataset (`--data`), merge's positional OUT (`--out`), `--count` and
+/// `--limit` (`--trajectories`), render's `--index` (`--trajectory`). A positional dataset and
+/// a different `--data` are refused.
+#[test]
+fn the_spellings_before_data_and_trajectories_still_work() {
+    let dir = scratch("dataset-old-spellings");
+    let (a, b, data) = (dir.join("a"), dir.join("b"), dir.join("data"));
+    for (shard, out) in [("0/2", &a), ("1/2", &b)] {
+        let args = ["dataset", "generate", "--split", "test", "--steps", "3"];
+        let shard = ["--count", "2", "--shard", shard, "--out"];
+        ok(run(&[&args[..], &shard].concat(), &[out]));
+    }
+    let deprecated = |output: Output, form: &str| {
+        let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+        let stdout = ok(output);
+        assert!(
+            stderr.contains(&format!("`{form}` is deprecated")),
+            "{form}: {stderr}"
+        );
+        stdout
+    };
+    deprecated(
+        run(&["dataset", "merge"], &[&data, &a, &b]),
+        "phi dataset merge OUT SHARDS...",
+    );
+    assert_eq!(Dataset::open(&data).unwrap().metadata().splits["test"], 2);
+
+    let stdout = deprecated(
+        run(
+            &["dataset", "stats", "--split", "test", "--limit", "1"],
+            &[&data],
+        ),
+        "phi dataset stats DATA",
+    );
+    assert!(stdout.contains("1 of 2 trajectories"), "{stdout}");
+    let other = dir.join("other");
+    let stderr = failed(run(&["dataset", "stats", "--data"], &[&other, &data]));
+    assert!(
+        stderr.contains("--data") && stderr.contains("differ"),
+        "{stderr}"
+    );
+    ok(run(&["dataset", "stats", "--data"], &[&data, &data]));
+
+    let (old, new) = (dir.join("old.gif"), dir.join("new.gif"));
+    deprecated(
+        run(&["render", "--index", "1", "--out"], &[&old, &data]),
+        "phi render DATA",
+    );
+    ok(run(
+        &["render", "--trajectory", "1", "--out"],
+        &[&new, Path::new("--data"), &data],
+    ));
+    assert_eq!(std::fs::read(&old).unwrap(), std::fs::read(&new).unwrap());
+
+    let (records, back) = (dir.join("records"), dir.join("back"));
+    deprecated(
+        run(
+            &["dataset", "export", "--format", "tfrecord", "--out"],
+            &[&records, &data],
+        ),
+        "phi dataset export DATA",
+    );
+    deprecated(
+        run(&["dataset", "import", "--out"], &[&back, &records]),
+        "phi dataset import DATA",
+    );
+    assert_eq!(files(&data), files(&back));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// `--split` names a split the dataset's metadata.json lists; another is refused naming the
+/// flag and the splits there are.
+#[test]
+fn a_split_the_dataset_lacks_is_refused_naming_the_flag_and_the_splits() {
+    let dir = scratch("dataset-split");
+    let data = dir.join("data");
+    ok(generate(&data, &["--split", "test"]));
+    let gif = dir.join("x.gif");
+    let gif = gif.to_str().unwrap();
+    for command in [&["dataset", "stats"][..], &["render", "--out", gif]] {
+        let stderr = failed(run(
+            &[command, &["--split", "valid", "--data"]].concat(),
+            &[&data],
+        ));
+        assert!(
+            stderr.contains("--split valid") && stderr.contains("its metadata.json lists test"),
+            "{command:?}: {stderr}"
+        );
+        let stderr = failed(run(
+            &[command, &["--split", "test/../valid", "--data"]].concat(),
+            &[&data],
+        ));
+        assert!(
+            stderr.contains("'--split <SPLIT>'") && stderr.contains("not a split name"),
+            "{command:?}: {stderr}"
+        );
+    }
     let _ = std::fs::remove_dir_all(dir);
 }

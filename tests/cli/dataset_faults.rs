@@ -8,11 +8,11 @@ use phi::phi_gns::data::{Dataset, read_metadata, read_trajectory};
 
 use super::{ok, phi, scratch};
 
-/// `phi dataset generate --out OUT --steps 2 --count N --split SPLIT [extra]`.
+/// `phi dataset generate --out OUT --steps 2 --trajectories N --split SPLIT [extra]`.
 fn generate(out: &Path, split: &str, count: usize, extra: &[&str]) -> Output {
     phi()
         .args(["dataset", "generate", "--steps", "2", "--split", split])
-        .args(["--count", &count.to_string(), "--out"])
+        .args(["--trajectories", &count.to_string(), "--out"])
         .arg(out)
         .args(extra)
         .output()
@@ -69,20 +69,20 @@ fn a_trajectory_of_another_split_fails_every_reader() {
     let (gif, npz, tf) = (dir.join("v.gif"), dir.join("npz"), dir.join("tf"));
     let readers: [(&[&str], Vec<&Path>); 4] = [
         (
-            &["dataset", "stats", "--split", "valid"],
+            &["dataset", "stats", "--split", "valid", "--data"],
             vec![data.as_path()],
         ),
         (
             &["render", "--split", "valid", "--out"],
-            vec![gif.as_path(), data.as_path()],
+            vec![gif.as_path(), Path::new("--data"), data.as_path()],
         ),
         (
             &["dataset", "export", "--format", "npz", "--out"],
-            vec![npz.as_path(), data.as_path()],
+            vec![npz.as_path(), Path::new("--data"), data.as_path()],
         ),
         (
             &["dataset", "export", "--format", "tfrecord", "--out"],
-            vec![tf.as_path(), data.as_path()],
+            vec![tf.as_path(), Path::new("--data"), data.as_path()],
         ),
     ];
     for (args, paths) in readers {
@@ -134,7 +134,7 @@ fn resume_remakes_damaged_files_and_removes_stale_temporary_files() {
     // Readers call the damage corrupt, not missing.
     let stderr = fails(run(
         &["dataset", "export", "--format", "npz", "--out"],
-        &[&dir.join("x"), &data],
+        &[&dir.join("x"), Path::new("--data"), &data],
     ));
     assert!(
         stderr.contains("corrupt") && !stderr.contains("has no array"),
@@ -183,7 +183,7 @@ fn quiet_keeps_the_results_and_drops_the_log() {
         .args([
             "-q", "dataset", "generate", "--steps", "2", "--split", "train",
         ])
-        .args(["--count", "1", "--out"])
+        .args(["--trajectories", "1", "--out"])
         .arg(&data)
         .output()
         .unwrap();
@@ -210,7 +210,7 @@ fn a_smaller_count_is_refused_unless_pruned() {
     let stderr = fails(generate(&data, "train", 1, &[]));
     assert!(
         stderr.contains("train/traj_00001.npz")
-            && stderr.contains("--count 2")
+            && stderr.contains("--trajectories 2")
             && stderr.contains("--prune"),
         "{stderr}"
     );
@@ -279,12 +279,15 @@ fn import_export_and_render_never_overwrite_data_unless_forced() {
     let records = dir.join("records");
     ok(run(
         &["dataset", "export", "--format", "tfrecord", "--out"],
-        &[&records, &other],
+        &[&records, Path::new("--data"), &other],
     ));
 
     // Import over a dataset: refused, the dataset untouched.
     let before = snapshot(&data);
-    let stderr = fails(run(&["dataset", "import", "--out"], &[&data, &records]));
+    let stderr = fails(run(
+        &["dataset", "import", "--out"],
+        &[&data, Path::new("--data"), &records],
+    ));
     assert!(
         stderr.contains("not empty") && stderr.contains("--force"),
         "{stderr}"
@@ -300,13 +303,13 @@ fn import_export_and_render_never_overwrite_data_unless_forced() {
     std::fs::write(damaged.join("train.tfrecord"), &bytes).unwrap();
     fails(run(
         &["dataset", "import", "--force", "--out"],
-        &[&data, &damaged],
+        &[&data, Path::new("--data"), &damaged],
     ));
     assert_eq!(snapshot(&data), before);
     // With --force a good import replaces it whole.
     ok(run(
         &["dataset", "import", "--force", "--out"],
-        &[&data, &records],
+        &[&data, Path::new("--data"), &records],
     ));
     assert_eq!(read_metadata(&data).unwrap().splits["train"], 1);
     assert_eq!(
@@ -327,13 +330,13 @@ fn import_export_and_render_never_overwrite_data_unless_forced() {
     std::fs::write(notes.join("a.txt"), "mine").unwrap();
     let stderr = fails(run(
         &["dataset", "export", "--format", "npz", "--out"],
-        &[&notes, &other],
+        &[&notes, Path::new("--data"), &other],
     ));
     assert!(stderr.contains("not empty"), "{stderr}");
     assert_eq!(std::fs::read(notes.join("a.txt")).unwrap(), b"mine");
     let stderr = fails(run(
         &["dataset", "export", "--format", "npz", "--force", "--out"],
-        &[&other, &other],
+        &[&other, Path::new("--data"), &other],
     ));
     assert!(stderr.contains("holds the dataset"), "{stderr}");
     Dataset::open(&other).unwrap();
@@ -345,7 +348,7 @@ fn import_export_and_render_never_overwrite_data_unless_forced() {
     for force in [&[][..], &["--force"][..]] {
         let stderr = fails(run(
             &[&["render", "--split", "train"], force, &["--out"]].concat(),
-            &[&metadata, &other],
+            &[&metadata, Path::new("--data"), &other],
         ));
         assert!(
             stderr.contains("is not a GIF") && stderr.contains("metadata.json"),
@@ -356,12 +359,12 @@ fn import_export_and_render_never_overwrite_data_unless_forced() {
     let gif = dir.join("t.gif");
     ok(run(
         &["render", "--split", "train", "--frame-every", "1", "--out"],
-        &[&gif, &other],
+        &[&gif, Path::new("--data"), &other],
     ));
     let drawn = std::fs::read(&gif).unwrap();
     let stderr = fails(run(
         &["render", "--split", "train", "--out"],
-        &[&gif, &other],
+        &[&gif, Path::new("--data"), &other],
     ));
     assert!(
         stderr.contains("t.gif") && stderr.contains("--force"),
@@ -370,7 +373,7 @@ fn import_export_and_render_never_overwrite_data_unless_forced() {
     assert_eq!(std::fs::read(&gif).unwrap(), drawn);
     ok(run(
         &["render", "--split", "train", "--force", "--out"],
-        &[&gif, &other],
+        &[&gif, Path::new("--data"), &other],
     ));
     assert_ne!(std::fs::read(&gif).unwrap(), drawn, "not redrawn");
     let _ = std::fs::remove_dir_all(dir);
@@ -387,7 +390,7 @@ fn requests_too_large_for_memory_are_refused_naming_the_key() {
         command.output().unwrap()
     };
     let stderr = fails(with_limit(
-        &["dataset", "stats", "--radius", "1e-6"],
+        &["dataset", "stats", "--radius", "1e-6", "--data"],
         &[&data],
     ));
     assert!(
@@ -402,14 +405,14 @@ fn requests_too_large_for_memory_are_refused_naming_the_key() {
             "generate",
             "--split",
             "train",
-            "--count",
+            "--trajectories",
             "1000000000000000",
             "--out",
         ],
         &[&dir.join("big")],
     ));
     assert!(
-        stderr.contains("--count") && stderr.contains("more than the limit"),
+        stderr.contains("--trajectories") && stderr.contains("more than the limit"),
         "{stderr}"
     );
 
@@ -419,11 +422,11 @@ fn requests_too_large_for_memory_are_refused_naming_the_key() {
         serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
     json["bounds"] = serde_json::json!([[0.0, 1e9], [0.0, 1e9]]);
     std::fs::write(&path, serde_json::to_vec(&json).unwrap()).unwrap();
-    let stderr = fails(with_limit(&["dataset", "stats"], &[&data]));
+    let stderr = fails(with_limit(&["dataset", "stats", "--data"], &[&data]));
     assert!(stderr.contains("--radius 0.03 over the bounds"), "{stderr}");
     let stderr = fails(run(
         &["render", "--split", "train", "--out"],
-        &[&dir.join("r.gif"), &data],
+        &[&dir.join("r.gif"), Path::new("--data"), &data],
     ));
     assert!(
         stderr.contains("metadata.json")

@@ -227,7 +227,22 @@ fn eval_refuses_what_does_not_fit() {
     );
     let m2s = [m2.display().to_string()];
     let stderr = failed(eval(&m2s, &plane, &out, &["--split", "valid"]));
-    assert!(stderr.contains("valid"), "{stderr}");
+    assert!(
+        stderr.contains("--split valid") && stderr.contains("its metadata.json lists test"),
+        "{stderr}"
+    );
+    // --gif-index and --gif-every, the names before --gif-trajectory and --frame-every, still
+    // work.
+    for gif in [
+        ["--gif-trajectory", "1", "--frame-every", "3"],
+        ["--gif-index", "1", "--gif-every", "3"],
+    ] {
+        let stderr = failed(eval(&m2s, &plane, &out, &gif));
+        assert!(
+            stderr.contains("--gif-trajectory 1: only trajectories 0..1"),
+            "{stderr}"
+        );
+    }
     let twice = [m2.display().to_string(), m2.display().to_string()];
     let stderr = failed(eval(&twice, &plane, &out, &[]));
     assert!(stderr.contains("NAME=DIR"), "{stderr}");
@@ -283,7 +298,7 @@ fn a_model_evaluated_on_the_walls_variant_joins_the_same_table() {
         "5",
         "--sinkhorn-every",
         "0",
-        "--gif-every",
+        "--frame-every",
         "4",
     ];
     let models = [a.display().to_string(), w.display().to_string()];

@@ -252,8 +252,8 @@ fn rollout_writes_predictions_truth_mse_and_gif() {
     let dir = scratch("rollout");
     let data = dir.join("data");
     ok(phi()
-        .args(["dataset", "generate", "--split", "test", "--count", "2"])
-        .args(["--steps", "30", "--out"])
+        .args(["dataset", "generate", "--split", "test"])
+        .args(["--trajectories", "2", "--steps", "30", "--out"])
         .arg(&data)
         .output()
         .unwrap());
@@ -262,7 +262,7 @@ fn rollout_writes_predictions_truth_mse_and_gif() {
     let out = dir.join("rollouts");
     // Test scene 1 (a narrow gap between obstacles): 8 steps from frame 5.
     let args = [
-        "--index",
+        "--trajectory",
         "1",
         "--steps",
         "8",
@@ -360,7 +360,14 @@ fn rollout_writes_predictions_truth_mse_and_gif() {
         &model,
         &data,
         &out,
-        &["--index", "1", "--steps", "8", "--mse-every-step", "-v"],
+        &[
+            "--trajectory",
+            "1",
+            "--steps",
+            "8",
+            "--mse-every-step",
+            "-v",
+        ],
     ));
     for e in &expected {
         assert!(stdout.contains(&format!("{e:.6e}")), "{stdout}");
@@ -453,13 +460,24 @@ fn rollout_refuses_foreign_outputs_and_missing_trajectories() {
     let model = dir.join("model");
     ok(init(&data, &model, &[]));
     let out = dir.join("out");
-    let stderr = failed(rollout(&model, &data, &out, &["--index", "2"]));
+    // --index, the name before --trajectory, still works.
+    for flag in ["--trajectory", "--index"] {
+        let stderr = failed(rollout(&model, &data, &out, &[flag, "2"]));
+        assert!(
+            stderr.contains("--trajectory 2") && stderr.contains("split 'test' has 2 trajectories"),
+            "{stderr}"
+        );
+    }
+    let stderr = failed(rollout(&model, &data, &out, &["--split", "train"]));
     assert!(
-        stderr.contains("--index 2") && stderr.contains("split 'test' has 2 trajectories"),
+        stderr.contains("--split train") && stderr.contains("its metadata.json lists test"),
         "{stderr}"
     );
-    let stderr = failed(rollout(&model, &data, &out, &["--split", "train"]));
-    assert!(stderr.contains("no split 'train'"), "{stderr}");
+    let stderr = failed(rollout(&model, &data, &out, &["--split", "../test"]));
+    assert!(
+        stderr.contains("--split") && stderr.contains("not a split name"),
+        "{stderr}"
+    );
     // A device that is not there (this is not a CUDA build, or it has no eighth GPU).
     let stderr = failed(rollout(&model, &data, &out, &["--device", "cuda:7"]));
     assert!(

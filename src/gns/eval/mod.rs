@@ -92,8 +92,8 @@ pub struct EvalArgs {
     /// and bounds. Repeat for several models.
     #[arg(long = "model-data", value_name = "NAME=DATASET")]
     pub model_data: Vec<String>,
-    /// The split to evaluate on.
-    #[arg(long, default_value = "test")]
+    /// The split to evaluate on: train, valid, test, or another its metadata.json lists.
+    #[arg(long, default_value = "test", value_name = "SPLIT", value_parser = crate::cli::parse_split)]
     pub split: String,
     /// Evaluate only the first N trajectories of the split [default: all].
     #[arg(long)]
@@ -120,12 +120,15 @@ pub struct EvalArgs {
     /// default_connectivity_radius].
     #[arg(long)]
     pub density_radius: Option<f64>,
-    /// The trajectory of rollouts.gif (an index into the split).
-    #[arg(long, default_value_t = 0)]
-    pub gif_index: usize,
-    /// A GIF picture every this many frames (0: no GIF).
-    #[arg(long, default_value_t = 2)]
-    pub gif_every: usize,
+    /// The trajectory of rollouts.gif, an index into the split (--gif-index before,
+    /// deprecated).
+    #[arg(long, alias = "gif-index", value_name = "I", default_value_t = 0)]
+    pub gif_trajectory: usize,
+    /// A picture of rollouts.gif every this many frames (0: no GIF; --gif-every before,
+    /// deprecated). The default, 2, as `phi render`'s: a panel per model beside the truth makes
+    /// each picture several times wider than `phi rollout`'s.
+    #[arg(long, alias = "gif-every", default_value_t = 2)]
+    pub frame_every: usize,
     /// Pixels per grid cell in the GIF.
     #[arg(long, default_value_t = 4)]
     pub pixels_per_cell: u32,
@@ -433,7 +436,7 @@ pub fn plan(args: &EvalArgs) -> Result<Plan> {
         bail!("--model-data {name}=…: no --model is named '{name}'");
     }
     let dataset = &datasets[0];
-    let count = dataset.split_len(&args.split)?;
+    let count = crate::cli::split_len(dataset, &args.data, &args.split)?;
     for (name, dir, other) in &model_data {
         same_scenes(dataset, other, &args.split)
             .with_context(|| format!("--model-data {name}={}", dir.display()))?;
@@ -455,10 +458,10 @@ pub fn plan(args: &EvalArgs) -> Result<Plan> {
         Some(n) => n,
         None => count,
     };
-    if args.gif_every > 0 && args.gif_index >= used {
+    if args.frame_every > 0 && args.gif_trajectory >= used {
         bail!(
-            "--gif-index {}: only trajectories 0..{used} are evaluated",
-            args.gif_index
+            "--gif-trajectory {}: only trajectories 0..{used} are evaluated",
+            args.gif_trajectory
         );
     }
     if args.short_rollout == 0 {
@@ -634,7 +637,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
         model.mse_band = Some(Band::of(evals, |e| &e.curves.mse));
         model.emd_band = Some(Band::of(evals, |e| &e.curves.emd));
     }
-    if args.gif_every > 0 && plan.datasets[0].metadata().dim == 2 {
+    if args.frame_every > 0 && plan.datasets[0].metadata().dim == 2 {
         record.gif = Some(crate::with_backend!(kind, B => write_gif::<B>(&plan, &args))?);
     }
     let mut figures = Vec::new();
@@ -781,8 +784,8 @@ fn evaluate_all<B: GnsKernels>(
         .collect())
 }
 
-/// Rolls every model out on trajectory `--gif-index` and writes `rollouts.gif`: the truth,
-/// then each model, side by side, every `--gif-every` frames from the start frame `C`. A model
+/// Rolls every model out on trajectory `--gif-trajectory` and writes `rollouts.gif`: the truth,
+/// then each model, side by side, every `--frame-every` frames from the start frame `C`. A model
 /// whose rollout blew up keeps its last finite frame, captioned "(blown up)"; one that reads
 /// more history frames than another shows the truth until its own start, captioned "(history)".
 fn write_gif<B: GnsKernels>(plan: &Plan, args: &EvalArgs) -> Result<GifRecord> {
@@ -791,7 +794,7 @@ fn write_gif<B: GnsKernels>(plan: &Plan, args: &EvalArgs) -> Result<GifRecord> {
     let trajectories: Vec<_> = plan
         .datasets
         .iter()
-        .map(|d| Ok(d.read_with_stats(&args.split, args.gif_index)?.0))
+        .map(|d| Ok(d.read_with_stats(&args.split, args.gif_trajectory)?.0))
         .collect::<Result<_>>()?;
     let trajectory = &trajectories[0];
     let device = B::default_device();
@@ -825,7 +828,7 @@ fn write_gif<B: GnsKernels>(plan: &Plan, args: &EvalArgs) -> Result<GifRecord> {
     let background = FrameStyle::default().background;
     let mut writer: Option<GifWriter> = None;
     let mut shown = Vec::new();
-    for frame in (start..trajectory.frames).step_by(args.gif_every) {
+    for frame in (start..trajectory.frames).step_by(args.frame_every) {
         let truth = trajectory.frame(frame);
         let mut pictures = vec![plots::captioned(
             &renderer.render(truth, &kinds[0])?,
@@ -871,7 +874,7 @@ fn write_gif<B: GnsKernels>(plan: &Plan, args: &EvalArgs) -> Result<GifRecord> {
     let mut panels = vec!["ground truth".to_string()];
     panels.extend(plan.models.iter().map(|m| m.label.clone()));
     Ok(GifRecord {
-        index: args.gif_index,
+        index: args.gif_trajectory,
         panels,
         frames: shown,
     })
