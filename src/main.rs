@@ -68,7 +68,9 @@ enum Command {
         /// Run this many steps instead of the scene's.
         #[arg(long)]
         steps: Option<usize>,
-        /// Render a frame every this many steps (0: no frames).
+        /// Render a frame (a PNG and a picture of the GIF) every this many steps (0: no
+        /// frames). The default, 1, draws every step of a scene, whose runs are short; `phi
+        /// render` draws a dataset's long trajectories every 2nd frame.
         #[arg(long, default_value_t = 1)]
         frame_every: usize,
         /// Pixels per grid cell in the frames.

@@ -57,7 +57,9 @@ pub struct OptimizeArgs {
     /// Use this loss instead of the file's: l2, sinkhorn or density.
     #[arg(long, value_parser = parse_loss)]
     pub loss: Option<LossSpec>,
-    /// Frames of every this many iterations (plus the first and the last).
+    /// Frames of every this many iterations (plus the first and the last). Iterations, not
+    /// steps: each draws two PNGs, so the default, 5, keeps a long optimisation's frames/
+    /// folder small.
     #[arg(long, default_value_t = 5)]
     pub frame_every: usize,
     /// Pixels per grid cell in the frames.
