@@ -117,6 +117,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    die_quietly_on_broken_pipe();
     let cli = Cli::parse();
     if cli.verbose {
         // SAFETY: nothing else runs yet (no thread has been started), so no other code reads the
@@ -137,6 +138,21 @@ fn main() -> ExitCode {
             eprint!("{}", error_report(&err, cli.verbose));
             ExitCode::FAILURE
         }
+    }
+}
+
+/// Lets a closed standard output (`phi dataset stats --data D | head -1`) end the process as it
+/// ends `cat` or `grep`: killed by SIGPIPE, status 141 in the shell, with nothing on stderr.
+/// Rust ignores SIGPIPE, so that `println!` would meet the error EPIPE and panic instead. Every
+/// file is written atomically (a temporary file renamed into place), so a process killed at a
+/// `println!` leaves no half-written output; at worst a temporary file that the next run
+/// removes or replaces.
+fn die_quietly_on_broken_pipe() {
+    #[cfg(unix)]
+    // SAFETY: nothing else runs yet (no thread has been started), so no other code installs a
+    // signal handler meanwhile; SIG_DFL is a valid disposition of SIGPIPE.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }
 

@@ -638,3 +638,34 @@ fn a_split_the_dataset_lacks_is_refused_naming_the_flag_and_the_splits() {
     }
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// A closed standard output (`phi dataset stats --data D | head -1`) ends a command quietly:
+/// killed by SIGPIPE as `cat` would be (status 141 in a shell), not a panic.
+#[test]
+fn a_closed_stdout_ends_a_command_quietly() {
+    let dir = scratch("dataset-closed-stdout");
+    let data = dir.join("data");
+    ok(generate(&data, &["--split", "test"]));
+    let mut child = phi()
+        .args(["dataset", "stats", "--data"])
+        .arg(&data)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The reader is gone before the report's first line is written.
+    drop(child.stdout.take());
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        !stderr.contains("panicked") && !stderr.contains("Broken pipe"),
+        "{stderr}"
+    );
+    #[cfg(unix)]
+    {
+        use std::os::unix::process::ExitStatusExt;
+        const SIGPIPE: i32 = 13;
+        assert_eq!(output.status.signal(), Some(SIGPIPE), "{:?}", output.status);
+    }
+    let _ = std::fs::remove_dir_all(dir);
+}
