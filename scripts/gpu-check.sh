@@ -68,8 +68,8 @@ ldd "$phi" | grep -E 'libtorch|libc10' | sed 's/ (0x.*//'
 
 echo "== dataset (400 train, 20 valid) [${SECONDS}s]"
 data="$work/data"
-timeout 150 "$phi" -q dataset generate --out "$data" --split train --count 400 --seed 0 || exit 1
-timeout 60 "$phi" -q dataset generate --out "$data" --split valid --count 20 --seed 0 || exit 1
+timeout 150 "$phi" -q dataset generate --out "$data" --split train --trajectories 400 --seed 0 || exit 1
+timeout 60 "$phi" -q dataset generate --out "$data" --split valid --trajectories 20 --seed 0 || exit 1
 cp "$data/metadata.json" "$small/metadata.json"
 
 train() { # name, device, steps, log_every, timeout, config
@@ -110,7 +110,7 @@ PYTHONUNBUFFERED=1 timeout 60 "$python" benches/anchors/gns/train_reference.py -
     --config configs/gns/1sn.toml --device cuda --bench-inference 300 \
     --init-from "$work/run-speed-cuda/checkpoints/step-0000000300"
 echo "== inference: phi rollout, 300 steps on cuda [${SECONDS}s]"
-timeout 90 "$phi" -q rollout --backend tch --device cuda --data "$data" --split valid --index 0 \
+timeout 90 "$phi" -q rollout --backend tch --device cuda --data "$data" --split valid --trajectory 0 \
     --model "$work/run-speed-cuda/checkpoints/step-0000000300" --steps 300 --frame-every 0 \
     --out "$work/rollout-cuda" && cp "$work/rollout-cuda"/*/rollout.json "$small/rollout-cuda.json"
 grep -E '"(wall|model)_seconds"' "$small/rollout-cuda.json"

@@ -16,8 +16,8 @@ for scene in scenes/*.toml; do
     echo
 done
 # The first five test scenes of table 5.1 (the same as in `phi dataset generate --split all`).
-target/release/phi dataset generate --out out/gns-test --split test --count 5
-target/release/phi rollout --model experiments/levers/mse-clip-warmup-2000 --data out/gns-test --index 4 \
+target/release/phi dataset generate --out out/gns-test --split test --trajectories 5
+target/release/phi rollout --model experiments/levers/mse-clip-warmup-2000 --data out/gns-test --trajectory 4 \
     --out out/gns-rollout --frame-every 2
 echo
 echo "GIFs:"
