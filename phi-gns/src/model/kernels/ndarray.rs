@@ -16,6 +16,7 @@ use rayon::prelude::*;
 
 use super::host::{
     ROWS_PER_BLOCK, accumulate_product, add_into, gather_sum_rows, layer_norm_rows, relu_in_place,
+    zeros,
 };
 use super::{Dense, EdgeInput, GnsKernels, LAYER_NORM_EPS, Norm};
 
@@ -119,8 +120,8 @@ fn blocked_mlp(
     first: impl Fn(usize, usize, &mut [f32]) + Sync,
 ) -> (Vec<f32>, Option<Vec<f32>>) {
     let width = layers.last().map_or(first_width, |l| l.outputs).max(1);
-    let mut out = vec![0.0f32; rows * width];
-    let mut updated = residual.map(|_| vec![0.0f32; rows * width]);
+    let mut out = zeros(rows * width);
+    let mut updated = residual.map(|_| zeros(rows * width));
     let widest = layers
         .iter()
         .map(|l| l.outputs)
