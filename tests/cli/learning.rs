@@ -75,7 +75,15 @@ fn generate(dir: &Path, split: &str, count: &str) {
     ok(phi()
         .args(["-q", "dataset", "generate", "--out"])
         .arg(dir.join("data"))
-        .args(["--split", split, "--count", count, "--threads", "1", "--config"])
+        .args([
+            "--split",
+            split,
+            "--count",
+            count,
+            "--threads",
+            "1",
+            "--config",
+        ])
         .arg(dir.join("generator.toml"))
         .output()
         .unwrap());
@@ -94,8 +102,7 @@ fn probe(dir: &Path, model: &Path) -> ([f64; 4], [f64; 4]) {
         .arg(&report)
         .output()
         .unwrap());
-    let rows: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    let rows: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     let rows = rows.as_array().unwrap();
     let read = |label: Option<&str>| {
         let row = rows
