@@ -78,7 +78,7 @@ fn generate(dir: &Path, split: &str, count: &str) {
         .args([
             "--split",
             split,
-            "--count",
+            "--trajectories",
             count,
             "--threads",
             "1",
