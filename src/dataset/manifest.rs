@@ -16,7 +16,7 @@ use phi_io::write_atomic;
 use serde::{Deserialize, Serialize};
 
 use super::{Split, TestScenes};
-use crate::output::target::{OutputSubdir, Outputs};
+use crate::output::target::{Marker, OutputSubdir, Outputs};
 
 /// The name of the generation manifest in a dataset directory.
 pub const MANIFEST: &str = "generator.json";
@@ -47,7 +47,7 @@ pub const GENERATE_OUTPUTS: Outputs = Outputs {
     flag: "--out",
     files: &[MANIFEST, METADATA_FILE],
     subdirs: SPLIT_DIRS,
-    marker: Some(MANIFEST),
+    marker: Some(Marker::file(MANIFEST)),
 };
 
 /// What `phi dataset merge` writes: the same files as [`GENERATE_OUTPUTS`].

@@ -3,9 +3,13 @@
 //! the file in the way.
 //!
 //! A command describes what it writes once ([`Outputs`] for a folder, [`OutputFile`] for a
-//! single file), and [`check_dir`] / [`check_file`] apply the rule. A folder's previous output is
-//! removed by [`Previous::remove`] only once the command has checked everything else, so a
-//! refused run leaves the target as it was.
+//! single file), and [`check_dir`] / [`check_file`] apply the rule. A folder is the command's
+//! own when every entry in it is a name of [`Outputs`] and, where the command writes a
+//! [`Marker`], the marker is there (and holds the command's key). A folder's previous output
+//! is removed by [`Previous::remove`] only once the command has checked everything else, so a
+//! refused run leaves the target as it was. A command that resumes its own unfinished output
+//! (`phi eval`) asks [`previous_output`] what is there and decides itself when `--force` is
+//! needed ([`Previous::require_force`]).
 
 use std::path::{Path, PathBuf};
 
@@ -15,12 +19,61 @@ use anyhow::{Context, Result, bail};
 /// starting with `prefix` and ending with `suffix`.
 #[derive(Debug, Clone, Copy)]
 pub struct OutputSubdir {
-    /// The folder's name.
+    /// The folder's name; `*` stands for any name (a dataset's split folders).
     pub name: &'static str,
     /// How the name of each file in it starts.
     pub prefix: &'static str,
     /// How the name of each file in it ends.
     pub suffix: &'static str,
+}
+
+/// The file by which a folder is recognised as a command's output: the command writes it
+/// first, and every one it writes holds `key` (a dotted JSON path) with `value`.
+#[derive(Debug, Clone, Copy)]
+pub struct Marker {
+    /// The file's name.
+    pub file: &'static str,
+    /// The JSON key and the string it holds; `None`: the file's presence is enough.
+    pub key: Option<(&'static str, &'static str)>,
+}
+
+impl Marker {
+    /// A marker recognised by its presence.
+    pub const fn file(file: &'static str) -> Self {
+        Self { file, key: None }
+    }
+
+    /// A JSON marker whose dotted `key` holds the string `value`.
+    pub const fn json(file: &'static str, key: &'static str, value: &'static str) -> Self {
+        Self {
+            file,
+            key: Some((key, value)),
+        }
+    }
+
+    /// Why the marker in `out` is not this command's, `None` when it is.
+    fn mismatch(&self, out: &Path) -> Option<String> {
+        let path = out.join(self.file);
+        if !path.is_file() {
+            return Some(format!("no {}", self.file));
+        }
+        let (key, value) = self.key?;
+        let json: Option<serde_json::Value> = std::fs::read(&path)
+            .ok()
+            .and_then(|bytes| serde_json::from_slice(&bytes).ok());
+        let Some(json) = json else {
+            return Some(format!("a {} that is not JSON", self.file));
+        };
+        let found = key
+            .split('.')
+            .try_fold(&json, |v, k| v.get(k))
+            .and_then(|v| v.as_str());
+        match found {
+            Some(found) if found == value => None,
+            Some(found) => Some(format!("a {} whose {key} is '{found}'", self.file)),
+            None => Some(format!("a {} without {key}", self.file)),
+        }
+    }
 }
 
 /// What a command writes into its target folder.
@@ -30,30 +83,75 @@ pub struct Outputs {
     pub command: &'static str,
     /// The option naming the target (`--out`).
     pub flag: &'static str,
-    /// The files it writes in the target.
+    /// The files it writes in the target; a `*` in a name stands for any text (`*.npz`).
     pub files: &'static [&'static str],
     /// The folders it writes in the target.
     pub subdirs: &'static [OutputSubdir],
     /// The file it writes first, where one exists: a target holding the command's other files
     /// without it was not written by the command (another tool's files of the same names).
-    pub marker: Option<&'static str>,
+    pub marker: Option<Marker>,
 }
 
 /// The previous output found in a target folder, to be removed before writing anew.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 #[must_use = "a previous output is replaced only once removed"]
 pub struct Previous {
+    out: PathBuf,
+    outputs: Outputs,
+    /// Every entry of the folder, sorted, for messages.
+    names: Vec<String>,
     files: Vec<PathBuf>,
     subdirs: Vec<PathBuf>,
 }
 
 impl Previous {
+    fn none(out: &Path, outputs: &Outputs) -> Self {
+        Self {
+            out: out.to_path_buf(),
+            outputs: *outputs,
+            names: Vec::new(),
+            files: Vec::new(),
+            subdirs: Vec::new(),
+        }
+    }
+
     /// Whether the target held nothing of a previous output.
     pub fn is_empty(&self) -> bool {
         self.files.is_empty() && self.subdirs.is_empty()
     }
 
-    /// Removes the previous output, so that the files of two runs never mix.
+    /// The previous output, refused unless `force` or there is none.
+    ///
+    /// # Errors
+    /// A previous output and no `force`: the message names the folder, what it holds and
+    /// `--force`.
+    pub fn require_force(self, force: bool) -> Result<Self> {
+        if force || self.is_empty() {
+            return Ok(self);
+        }
+        let Outputs { command, flag, .. } = self.outputs;
+        let names = &self.names;
+        let shown = names.iter().take(3).cloned().collect::<Vec<_>>().join(", ");
+        bail!(
+            "{flag} {}: is not empty ({} entries: {shown}{}); it holds a previous `{command}` \
+             output: pass --force to replace it, or choose a new or empty {flag}",
+            self.out.display(),
+            names.len(),
+            if names.len() > 3 { ", ..." } else { "" }
+        );
+    }
+
+    /// The previous output without the entry `name`, which the command keeps (`phi eval`'s
+    /// cache, reused where it fits).
+    pub fn keep(mut self, name: &str) -> Self {
+        let kept = self.out.join(name);
+        self.files.retain(|f| *f != kept && !is_temporary(f, name));
+        self.subdirs.retain(|d| *d != kept);
+        self
+    }
+
+    /// Removes the previous output, so that the files of two runs never mix. The marker goes
+    /// last, so that a run killed meanwhile leaves a folder still recognised as the command's.
     ///
     /// # Errors
     /// A file or folder that cannot be removed, named.
@@ -62,7 +160,10 @@ impl Previous {
             std::fs::remove_dir_all(dir)
                 .with_context(|| format!("removing the previous output {}", dir.display()))?;
         }
-        for file in &self.files {
+        let marker = self.outputs.marker.map(|m| self.out.join(m.file));
+        let (last, first): (Vec<_>, Vec<_>) =
+            self.files.iter().partition(|f| Some(*f) == marker.as_ref());
+        for file in first.into_iter().chain(last) {
             std::fs::remove_file(file)
                 .with_context(|| format!("removing the previous output {}", file.display()))?;
         }
@@ -70,15 +171,30 @@ impl Previous {
     }
 }
 
-/// Whether `name` is `file` or the temporary file of an atomic write of it
-/// (`.{file}.tmp-{pid}`), which a killed run leaves behind.
-fn is_file_or_temporary(name: &str, file: &str) -> bool {
-    name == file
-        || name
-            .strip_prefix('.')
-            .and_then(|rest| rest.strip_prefix(file))
-            .and_then(|rest| rest.strip_prefix(".tmp-"))
-            .is_some_and(|pid| !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()))
+/// Whether `path` is the temporary file of an atomic write of `name` in the same folder.
+fn is_temporary(path: &Path, name: &str) -> bool {
+    path.file_name()
+        .and_then(|n| n.to_str())
+        .is_some_and(|n| n != name && written_name(n) == name)
+}
+
+/// The name of the file that `name` is being written to: `file` for the temporary file of an
+/// atomic write (`.{file}.tmp-{pid}`, which a killed run leaves behind), else `name`.
+fn written_name(name: &str) -> &str {
+    name.strip_prefix('.')
+        .and_then(|rest| rest.rsplit_once(".tmp-"))
+        .filter(|(_, pid)| !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()))
+        .map_or(name, |(file, _)| file)
+}
+
+/// Whether `name` matches `pattern`, in which one `*` stands for any non-empty text.
+fn matches(pattern: &str, name: &str) -> bool {
+    match pattern.split_once('*') {
+        None => pattern == name,
+        Some((head, tail)) => {
+            name.len() > head.len() + tail.len() && name.starts_with(head) && name.ends_with(tail)
+        }
+    }
 }
 
 /// The sorted names in `dir`.
@@ -92,6 +208,17 @@ fn list(dir: &Path) -> Result<Vec<String>> {
     Ok(names)
 }
 
+/// Refuses a `path` that exists and is not a directory, naming `flag`.
+///
+/// # Errors
+/// As above.
+pub fn check_not_a_file(path: &Path, flag: &str) -> Result<()> {
+    if path.exists() && !path.is_dir() {
+        bail!("{flag} {}: exists and is not a directory", path.display());
+    }
+    Ok(())
+}
+
 /// Applies the rule to the target folder `out` of `outputs.command`: a missing or empty folder
 /// is fine; one holding only the command's outputs is its previous output, refused without
 /// `force` and returned with it (remove it with [`Previous::remove`] before writing); anything
@@ -101,6 +228,17 @@ fn list(dir: &Path) -> Result<Vec<String>> {
 /// `out` is a file; holds a file or folder the command does not write (named with its path
 /// inside `out`); holds a previous output and `force` is off.
 pub fn check_dir(out: &Path, outputs: &Outputs, force: bool) -> Result<Previous> {
+    previous_output(out, outputs, force)?.require_force(force)
+}
+
+/// What of `outputs.command`'s previous output `out` holds, refusing a folder that holds
+/// anything else; unlike [`check_dir`], a previous output is returned whether or not `force`
+/// (which only words the refusals).
+///
+/// # Errors
+/// `out` is a file; holds a file or folder the command does not write, or the command's file
+/// names without its marker.
+pub fn previous_output(out: &Path, outputs: &Outputs, force: bool) -> Result<Previous> {
     let Outputs {
         command,
         flag,
@@ -108,8 +246,9 @@ pub fn check_dir(out: &Path, outputs: &Outputs, force: bool) -> Result<Previous>
         subdirs,
         marker,
     } = *outputs;
+    let mut previous = Previous::none(out, outputs);
     if !out.exists() {
-        return Ok(Previous::default());
+        return Ok(previous);
     }
     if !out.is_dir() {
         bail!(
@@ -118,14 +257,13 @@ pub fn check_dir(out: &Path, outputs: &Outputs, force: bool) -> Result<Previous>
         );
     }
     let names = list(out)?;
-    let mut previous = Previous::default();
     let mut foreign = None;
     for name in &names {
-        if files.iter().any(|f| is_file_or_temporary(name, f)) {
+        if files.iter().any(|f| matches(f, written_name(name))) {
             previous.files.push(out.join(name));
             continue;
         }
-        let Some(subdir) = subdirs.iter().find(|d| d.name == name) else {
+        let Some(subdir) = subdirs.iter().find(|d| matches(d.name, name)) else {
             foreign.get_or_insert_with(|| name.clone());
             continue;
         };
@@ -136,8 +274,7 @@ pub fn check_dir(out: &Path, outputs: &Outputs, force: bool) -> Result<Previous>
         }
         let inside = list(&dir)?;
         let ours = |n: &String| {
-            let stem = n.strip_prefix('.').and_then(|r| r.rsplit_once(".tmp-"));
-            let file = stem.map_or(n.as_str(), |(file, _)| file);
+            let file = written_name(n);
             file.starts_with(subdir.prefix) && file.ends_with(subdir.suffix)
         };
         match inside.iter().find(|n| !ours(n)) {
@@ -147,6 +284,7 @@ pub fn check_dir(out: &Path, outputs: &Outputs, force: bool) -> Result<Previous>
             None => previous.subdirs.push(dir),
         }
     }
+    let even = if force { " even with --force" } else { "" };
     if let Some(name) = foreign {
         let what = if name == "metadata.json" {
             " (a dataset)"
@@ -155,34 +293,25 @@ pub fn check_dir(out: &Path, outputs: &Outputs, force: bool) -> Result<Previous>
         };
         bail!(
             "{flag} {}: holds '{name}'{what}, which `{command}` does not write; refusing to \
-             write into it{}: choose a new or empty {flag}",
+             write into it{even}: choose a new or empty {flag}",
             out.display(),
-            if force { " even with --force" } else { "" }
         );
     }
     if previous.is_empty() {
         return Ok(previous);
     }
     if let Some(marker) = marker
-        && !out.join(marker).is_file()
+        && let Some(mismatch) = marker.mismatch(out)
     {
         bail!(
-            "{flag} {}: holds '{}' but no {marker}, which `{command}` writes first: not its \
-             output; refusing to write into it: choose a new or empty {flag}",
+            "{flag} {}: holds '{}' but {mismatch} (`{command}` writes {} first): not its \
+             output; refusing to write into it{even}: choose a new or empty {flag}",
             out.display(),
-            names[0]
+            names[0],
+            marker.file
         );
     }
-    if !force {
-        let shown = names.iter().take(3).cloned().collect::<Vec<_>>().join(", ");
-        bail!(
-            "{flag} {}: is not empty ({} entries: {shown}{}); it holds a previous `{command}` \
-             output: pass --force to replace it, or choose a new or empty {flag}",
-            out.display(),
-            names.len(),
-            if names.len() > 3 { ", ..." } else { "" }
-        );
-    }
+    previous.names = names;
     Ok(previous)
 }
 
@@ -262,8 +391,10 @@ mod tests {
             prefix: "frame_",
             suffix: ".png",
         }],
-        marker: Some("record.json"),
+        marker: Some(Marker::json("record.json", "made.by", "phi test")),
     };
+
+    const RECORD: &str = r#"{"made": {"by": "phi test"}}"#;
 
     #[test]
     fn a_missing_or_empty_folder_is_fine() {
@@ -280,7 +411,7 @@ mod tests {
     #[test]
     fn a_previous_output_is_replaced_only_with_force() {
         let dir = temp_dir("target-previous");
-        std::fs::write(dir.join("record.json"), "{}").unwrap();
+        std::fs::write(dir.join("record.json"), RECORD).unwrap();
         std::fs::write(dir.join(".data.csv.tmp-12"), "").unwrap();
         std::fs::create_dir(dir.join("frames")).unwrap();
         std::fs::write(dir.join("frames/frame_00001.png"), "").unwrap();
@@ -303,7 +434,7 @@ mod tests {
             ("metadata.json", "(a dataset)"),
         ] {
             let dir = temp_dir("target-foreign");
-            std::fs::write(dir.join("record.json"), "{}").unwrap();
+            std::fs::write(dir.join("record.json"), RECORD).unwrap();
             std::fs::create_dir(dir.join("frames")).unwrap();
             std::fs::write(dir.join(place), "mine").unwrap();
             for force in [false, true] {
@@ -319,11 +450,54 @@ mod tests {
     }
 
     #[test]
-    fn our_file_names_without_the_marker_are_not_ours() {
+    fn our_file_names_without_our_marker_are_not_ours() {
         let dir = temp_dir("target-marker");
         std::fs::write(dir.join("data.csv"), "1,2").unwrap();
         let error = check_dir(&dir, &OUTPUTS, true).unwrap_err().to_string();
         assert!(error.contains("no record.json"), "{error}");
+        for (record, expected) in [
+            (r#"{"made": {"by": "phi other"}}"#, "made.by is 'phi other'"),
+            (r#"{"made": 1}"#, "without made.by"),
+            ("not json", "not JSON"),
+        ] {
+            std::fs::write(dir.join("record.json"), record).unwrap();
+            let error = check_dir(&dir, &OUTPUTS, true).unwrap_err().to_string();
+            assert!(
+                error.contains(expected) && error.contains("even with --force"),
+                "{error}"
+            );
+        }
+        assert_eq!(std::fs::read(dir.join("data.csv")).unwrap(), b"1,2");
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    #[test]
+    fn patterns_match_names_and_kept_entries_stay() {
+        const PATTERNS: Outputs = Outputs {
+            command: "phi test",
+            flag: "--out",
+            files: &["record.json", "*.npz"],
+            subdirs: &[OutputSubdir {
+                name: "*",
+                prefix: "",
+                suffix: ".json",
+            }],
+            marker: Some(Marker::file("record.json")),
+        };
+        assert!(matches("*.npz", "train.npz") && !matches("*.npz", ".npz"));
+        assert!(!matches("*.npz", "train.npz.bak") && matches("a", "a") && !matches("a", "ab"));
+        let dir = temp_dir("target-patterns");
+        std::fs::write(dir.join("record.json"), "{}").unwrap();
+        std::fs::write(dir.join("train.npz"), "").unwrap();
+        std::fs::write(dir.join(".valid.npz.tmp-3"), "").unwrap();
+        std::fs::create_dir_all(dir.join("cache")).unwrap();
+        std::fs::write(dir.join("cache/b.json"), "").unwrap();
+        let previous = previous_output(&dir, &PATTERNS, false).unwrap();
+        let error = previous.require_force(false).unwrap_err().to_string();
+        assert!(error.contains("--force"), "{error}");
+        let previous = previous_output(&dir, &PATTERNS, false).unwrap();
+        previous.keep("cache").keep("record.json").remove().unwrap();
+        assert_eq!(list(&dir).unwrap(), ["cache", "record.json"]);
         let _ = std::fs::remove_dir_all(dir);
     }
 
