@@ -80,17 +80,20 @@ if wants train; then
 fi
 
 if wants eval; then
+    # --force: an evaluation made before is written anew from its cache, recomputing only the
+    # trajectories of models whose weights changed since.
     # Table B.1: all five on the test scenes, 1snb on their walls variant.
     models=()
     for v in 1s 1sn 1snb 2ss 2si; do models+=(--model "$v=$runs/$v"); done
     "$phi" eval "${models[@]}" --data "$data/flip" --model-data "1snb=$data/flip-walls" \
-        --split test --out "$runs/eval"
+        --split test --out "$runs/eval" --force
     # Fig. 5.9: 1sn with its boundary features against the taller domain's walls, 1snb with the
     # walls as particles; then 1sn measuring the walls it was trained with.
     "$phi" eval --model "1sn=$runs/1sn" --model "1snb=$runs/1snb" --data "$data/tall" \
-        --model-data "1snb=$data/tall-walls" --split test --bounds data --out "$runs/eval-tall"
+        --model-data "1snb=$data/tall-walls" --split test --bounds data --out "$runs/eval-tall" \
+        --force
     "$phi" eval --model "1sn=$runs/1sn" --data "$data/tall" --split test --bounds model \
-        --out "$runs/eval-tall-model-walls"
+        --out "$runs/eval-tall-model-walls" --force
 fi
 
 if wants optimize; then

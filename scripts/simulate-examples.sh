@@ -18,7 +18,7 @@ done
 # The first five test scenes of table 5.1 (the same as in `phi dataset generate --split all`).
 target/release/phi dataset generate --out out/gns-test --split test --trajectories 5
 target/release/phi rollout --model experiments/levers/mse-clip-warmup-2000 --data out/gns-test --trajectory 4 \
-    --out out/gns-rollout --frame-every 2
+    --out out/gns-rollout --frame-every 2 --force
 echo
 echo "GIFs:"
 ls -1 out/*/simulation.gif out/gns-rollout/test_4/rollout.gif

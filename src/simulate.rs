@@ -35,7 +35,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 
 use phi_core::fields::LatticeKernels;
 use phi_flip::{Particles, Scene};
@@ -541,12 +541,4 @@ fn side_view(
         resolution: new_res,
         solid: mask,
     }
-}
-
-/// Refuses an output directory that is a file.
-pub fn check_out_dir(out: &Path) -> Result<()> {
-    if out.exists() && !out.is_dir() {
-        bail!("{} exists and is not a directory", out.display());
-    }
-    Ok(())
 }

@@ -6,22 +6,33 @@
 //! are off for a dataset whose walls are particles (variant `walls_as_particles`). The same
 //! options and seed give the same bytes.
 //!
-//! The directory is written only when it does not exist, is empty, or holds nothing but a
+//! The directory is written when it does not exist or is empty. One that holds nothing but a
 //! `model.json` and `model.safetensors` that this command wrote (its `model.json` says
-//! `"provenance": {"made_by": "phi model init", ...}`); anything else (other files, a trained
-//! model, weights without a `model.json`) is refused.
+//! `"provenance": {"made_by": "phi model init", ...}`) is replaced only with `--force`; anything
+//! else (other files, a trained model, weights without a `model.json`) is refused even then
+//! ([`MODEL_OUTPUTS`]).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use phi_core::backend::Host;
 use phi_gns::data::{METADATA_FILE, Metadata, Variant, read_metadata};
 use phi_gns::model::{Gns, GnsConfig, MODEL_FILE, ModelError, ModelSpec, WEIGHTS_FILE, save_model};
 
-use super::is_temporary_of;
+use crate::output::target::{Marker, Outputs, check_dir};
 
 /// The value of `provenance.made_by` in the `model.json` this command writes.
 pub const MADE_BY: &str = "phi model init";
+
+/// What `phi model init` writes: a model, recognised by the `provenance.made_by` of its
+/// `model.json`.
+pub const MODEL_OUTPUTS: Outputs = Outputs {
+    command: "phi model init",
+    flag: "--out",
+    files: &[MODEL_FILE, WEIGHTS_FILE],
+    subdirs: &[],
+    marker: Some(Marker::json(MODEL_FILE, "provenance.made_by", MADE_BY)),
+};
 
 /// `phi model <command>`.
 #[derive(Debug, clap::Subcommand)]
@@ -44,6 +55,10 @@ pub struct InitArgs {
     /// The model directory to write.
     #[arg(long)]
     pub out: PathBuf,
+    /// Replace a model that `phi model init` wrote in --out (anything else is refused even
+    /// then).
+    #[arg(long)]
+    pub force: bool,
     /// The seed of the initial weights.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -147,7 +162,7 @@ fn option_of(key: &str) -> Option<&'static str> {
 /// # Errors
 /// An unreadable dataset, options that do not make a valid model (naming the option), a
 /// dataset without usable statistics (naming its metadata key), an output directory this
-/// command did not write, I/O errors.
+/// command did not write, one it wrote without `--force`, I/O errors.
 pub fn init(args: &InitArgs) -> Result<InitSummary> {
     let metadata = read_metadata(&args.data)?;
     let config = config_for(args, &metadata);
@@ -179,77 +194,15 @@ pub fn init(args: &InitArgs) -> Result<InitSummary> {
             _ => return Err(e.into()),
         }
     }
-    check_model_dir(&args.out)?;
+    let previous = check_dir(&args.out, &MODEL_OUTPUTS, args.force)?;
     let model = Gns::<Host>::init(spec, &Default::default())?;
+    previous.remove()?;
     save_model(&args.out, &model)?;
     Ok(InitSummary {
         spec: model.spec().clone(),
         parameters: model.params().scalar_count(),
         tensors: model.params().len(),
     })
-}
-
-/// Refuses a model directory that `phi model init` did not write: one that is a file, holds
-/// files other than `model.json` and `model.safetensors` (and the temporary files of their
-/// atomic writes), or whose `model.json` is missing or lacks `"provenance": {"made_by":
-/// "phi model init"}`. A missing or empty directory is fine.
-///
-/// # Errors
-/// Naming the directory and the file that is not ours.
-pub fn check_model_dir(out: &Path) -> Result<()> {
-    if !out.exists() {
-        return Ok(());
-    }
-    if !out.is_dir() {
-        bail!("{} exists and is not a directory", out.display());
-    }
-    let ours = [MODEL_FILE, WEIGHTS_FILE];
-    let mut present = Vec::new();
-    for entry in std::fs::read_dir(out).with_context(|| format!("reading {}", out.display()))? {
-        let name = entry
-            .with_context(|| format!("reading {}", out.display()))?
-            .file_name();
-        if is_temporary_of(&name, &ours) {
-            continue;
-        }
-        match name.to_str().filter(|n| ours.contains(n)) {
-            Some(n) => present.push(n.to_string()),
-            None => bail!(
-                "{} holds '{}', which `phi model init` did not write; choose another --out or \
-                 empty it",
-                out.display(),
-                name.to_string_lossy()
-            ),
-        }
-    }
-    if present.is_empty() {
-        return Ok(());
-    }
-    let json = out.join(MODEL_FILE);
-    if !json.is_file() {
-        bail!(
-            "{} holds {WEIGHTS_FILE} without {MODEL_FILE}: not a model `phi model init` wrote \
-             (it writes both); refusing to overwrite it",
-            out.display()
-        );
-    }
-    let value: Option<serde_json::Value> = std::fs::read(&json)
-        .ok()
-        .and_then(|bytes| serde_json::from_slice(&bytes).ok());
-    let made_by = value
-        .as_ref()
-        .and_then(|v| v.get("provenance"))
-        .and_then(|p| p.get("made_by"))
-        .and_then(|m| m.as_str());
-    if made_by != Some(MADE_BY) {
-        bail!(
-            "'{}': a model that `phi model init` did not write (provenance.made_by is {}); \
-             refusing to overwrite it: choose another --out",
-            json.display(),
-            made_by.map_or("missing".to_string(), |m| format!("'{m}'"))
-        );
-    }
-    Ok(())
 }
 
 /// Runs `phi model <command>` and prints what it wrote.

@@ -15,9 +15,11 @@
 //!   a trained model's rollout instead of FLIP.
 //!
 //! The files are those of [`phi_gns::model`] and [`phi_gns::data`]; `docs/gns.md` describes
-//! them and the commands. Neither command overwrites files it did not write: each recognises
-//! its own outputs by a key of the JSON file it writes first (see [`init::check_model_dir`] and
-//! [`rollout::check_rollout_dir`]).
+//! them and the commands. No command overwrites files it did not write, and `model init`,
+//! `rollout` and `eval` replace their own earlier output only with `--force`: each recognises
+//! its outputs by a key of the JSON file it writes first ([`init::MODEL_OUTPUTS`],
+//! [`rollout::ROLLOUT_OUTPUTS`], [`eval::EVAL_OUTPUTS`]; the rule is
+//! [`crate::output::target`]'s).
 
 pub mod eval;
 pub mod init;
@@ -25,22 +27,6 @@ pub mod inverse;
 pub mod probe;
 pub mod rollout;
 pub mod train;
-
-use std::ffi::OsStr;
-
-/// Whether `name` is the temporary file of an atomic write of one of `files`
-/// (`.{file}.tmp-{pid}`): what a process killed mid-write leaves beside its outputs.
-pub(crate) fn is_temporary_of(name: &OsStr, files: &[&str]) -> bool {
-    let Some(name) = name.to_str() else {
-        return false;
-    };
-    files.iter().any(|file| {
-        name.strip_prefix('.')
-            .and_then(|rest| rest.strip_prefix(file))
-            .and_then(|rest| rest.strip_prefix(".tmp-"))
-            .is_some_and(|pid| !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()))
-    })
-}
 
 /// `--bounds`: the walls a model with boundary features measures against when the dataset's
 /// domain is not the one it was trained on (domain generalisation, thesis fig. 5.9).

@@ -16,6 +16,10 @@
 //! - with `--vtk-every N`: `rollout.pvd` and `truth.pvd`, VTK series of the prediction and the
 //!   truth (the start frame and every `N`-th step; frames in `vtk/`), for ParaView.
 //!
+//! A trajectory's folder must be new or empty, or hold an earlier rollout (recognised by its
+//! `rollout.json`), which only `--force` replaces; a folder holding anything else is refused even
+//! then ([`ROLLOUT_OUTPUTS`]). Other folders in `OUT` are left alone.
+//!
 //! A prediction with a NaN or infinite position stops the trajectory's rollout: the frames
 //! before it are written, `rollout.json` says `"complete": false` with the reason (step, frame
 //! and particle) and `failed_step`, the GIF is closed, and the command exits non-zero once the
@@ -32,9 +36,12 @@ use phi_gns::model::{Gns, GnsKernels, ModelError, load_model, read_spec};
 use phi_gns::rollout::{RolloutRange, position_mse, rollout};
 use serde::{Deserialize, Serialize};
 
-use super::{BoundsFrom, bounds_for, is_temporary_of};
+use super::{BoundsFrom, bounds_for};
 use crate::backends::BackendKind;
 use crate::dataset::render::DatasetRenderer;
+use crate::output::target::{
+    Marker, OutputSubdir, Outputs, Previous, check_not_a_file, previous_output,
+};
 use crate::output::vtk::{VtkFrame, VtkSeries};
 use crate::output::{
     ArrayData, FrameStyle, GifWriter, NpyArray, OutputError, RgbImage, side_by_side, write_atomic,
@@ -56,6 +63,26 @@ pub const RUNNING: &str = "not finished: the rollout is running or was interrupt
 
 /// The VTK series of the prediction, of the truth, and their folder.
 pub const VTK_FILES: [&str; 3] = ["rollout.pvd", "truth.pvd", "vtk"];
+
+/// What `phi rollout` writes in each trajectory's folder, recognised by its [`RECORD_FILE`]
+/// of [`ROLLOUT_FORMAT`].
+pub const ROLLOUT_OUTPUTS: Outputs = Outputs {
+    command: "phi rollout",
+    flag: "--out",
+    files: &[
+        RECORD_FILE,
+        POSITIONS_FILE,
+        GIF_FILE,
+        VTK_FILES[0],
+        VTK_FILES[1],
+    ],
+    subdirs: &[OutputSubdir {
+        name: VTK_FILES[2],
+        prefix: "",
+        suffix: ".vtu",
+    }],
+    marker: Some(Marker::json(RECORD_FILE, "format", ROLLOUT_FORMAT)),
+};
 
 /// Columns of background between the truth and the prediction in the GIF.
 const GIF_GAP: u32 = 6;
@@ -95,6 +122,10 @@ pub struct RolloutArgs {
     /// The output directory: one folder `<split>_<index>` per trajectory.
     #[arg(long)]
     pub out: PathBuf,
+    /// Replace the earlier rollouts of these trajectories in --out (only files `phi rollout`
+    /// writes; anything else is refused even then).
+    #[arg(long)]
+    pub force: bool,
     /// Rewrite rollout.npz and rollout.json every this many steps (0: only at the end).
     #[arg(long, default_value_t = 25)]
     pub checkpoint_every: usize,
@@ -189,6 +220,8 @@ pub struct Plan {
     indices: Vec<usize>,
     range: RolloutRange,
     dirs: Vec<PathBuf>,
+    /// The earlier rollouts in `dirs` that --force replaces.
+    previous: Vec<Previous>,
     /// The dataset's bounds for the model's boundary features (`--bounds data`).
     bounds: Option<Vec<[f64; 2]>>,
 }
@@ -196,7 +229,7 @@ pub struct Plan {
 /// Checks everything a rollout needs before anything is written: the model's `model.json`, the
 /// dataset and that the model fits it ([`ModelSpec::check_dataset`](phi_gns::model::ModelSpec::check_dataset): dimension, bounds,
 /// particle types), the split and index, the start and steps, and the output folders
-/// ([`check_rollout_dir`]).
+/// ([`ROLLOUT_OUTPUTS`]: new or empty, or an earlier rollout and `--force`).
 ///
 /// # Errors
 /// Naming the file, key or option and what is wrong.
@@ -265,78 +298,27 @@ pub fn plan(args: &RolloutArgs) -> Result<Plan> {
             frames - 1
         )
     })?;
-    crate::simulate::check_out_dir(&args.out)?;
+    check_not_a_file(&args.out, "--out")?;
     let dirs: Vec<PathBuf> = indices
         .iter()
         .map(|&i| args.out.join(rollout_dir_name(&args.split, i)))
         .collect();
-    for dir in &dirs {
-        check_rollout_dir(dir)?;
-    }
+    // Files of others in any folder first: they are refused even with --force.
+    let previous = dirs
+        .iter()
+        .map(|dir| previous_output(dir, &ROLLOUT_OUTPUTS, args.force))
+        .collect::<Result<Vec<_>>>()?
+        .into_iter()
+        .map(|previous| previous.require_force(args.force))
+        .collect::<Result<_>>()?;
     Ok(Plan {
         dataset,
         indices,
         range,
         dirs,
+        previous,
         bounds,
     })
-}
-
-/// Refuses a rollout folder that `phi rollout` did not write: one that is a file, holds
-/// anything but `rollout.json`, `rollout.npz`, `rollout.gif` (and the temporary files of their
-/// atomic writes), or holds files without a `rollout.json` of [`ROLLOUT_FORMAT`]. A missing or
-/// empty folder is fine. (`rollout.json` is the first file a rollout writes.)
-///
-/// # Errors
-/// Naming the folder and the file that is not ours.
-pub fn check_rollout_dir(dir: &Path) -> Result<()> {
-    if !dir.exists() {
-        return Ok(());
-    }
-    if !dir.is_dir() {
-        bail!("{} exists and is not a directory", dir.display());
-    }
-    let ours = [
-        RECORD_FILE,
-        POSITIONS_FILE,
-        GIF_FILE,
-        VTK_FILES[0],
-        VTK_FILES[1],
-        VTK_FILES[2],
-    ];
-    let mut any = false;
-    for entry in std::fs::read_dir(dir).with_context(|| format!("reading {}", dir.display()))? {
-        let name = entry
-            .with_context(|| format!("reading {}", dir.display()))?
-            .file_name();
-        if is_temporary_of(&name, &ours) {
-            continue;
-        }
-        if !name.to_str().is_some_and(|n| ours.contains(&n)) {
-            bail!(
-                "{} holds '{}', which `phi rollout` did not write; choose another --out",
-                dir.display(),
-                name.to_string_lossy()
-            );
-        }
-        any = true;
-    }
-    if !any {
-        return Ok(());
-    }
-    let record = dir.join(RECORD_FILE);
-    let format = std::fs::read(&record)
-        .ok()
-        .and_then(|bytes| serde_json::from_slice::<serde_json::Value>(&bytes).ok())
-        .and_then(|v| v.get("format").and_then(|f| f.as_str()).map(str::to_string));
-    if format.as_deref() != Some(ROLLOUT_FORMAT) {
-        bail!(
-            "{} holds rollout files without a {RECORD_FILE} of format '{ROLLOUT_FORMAT}': \
-             `phi rollout` did not write them; refusing to overwrite them: choose another --out",
-            dir.display()
-        );
-    }
-    Ok(())
 }
 
 /// Runs `phi rollout` and prints each trajectory's MSE.
@@ -345,9 +327,10 @@ pub fn check_rollout_dir(dir: &Path) -> Result<()> {
 /// As [`plan`]; a model that does not load; I/O errors; and, after every trajectory was
 /// rolled out, an error naming each one that stopped early and its step.
 pub fn run(args: RolloutArgs) -> Result<()> {
-    let plan = plan(&args)?;
+    let mut plan = plan(&args)?;
+    let previous = std::mem::take(&mut plan.previous);
     let kind = args.backend.unwrap_or_else(BackendKind::default_forward);
-    let records = crate::with_backend!(kind, B => roll_all::<B>(&plan, &args))?;
+    let records = crate::with_backend!(kind, B => roll_all::<B>(&plan, previous, &args))?;
     let failed: Vec<String> = records
         .iter()
         .zip(&plan.dirs)
@@ -372,9 +355,13 @@ pub fn run(args: RolloutArgs) -> Result<()> {
     Ok(())
 }
 
-/// Loads the model on backend `B` and rolls it out on each planned trajectory, printing each
-/// one's summary.
-fn roll_all<B: GnsKernels>(plan: &Plan, args: &RolloutArgs) -> Result<Vec<RolloutRecord>> {
+/// Loads the model on backend `B`, removes the `previous` rollouts and rolls the model out on
+/// each planned trajectory, printing each one's summary.
+fn roll_all<B: GnsKernels>(
+    plan: &Plan,
+    previous: Vec<Previous>,
+    args: &RolloutArgs,
+) -> Result<Vec<RolloutRecord>> {
     let Some(device) = B::device_by_name(&args.device) else {
         bail!(
             "--device {}: not available on the {} backend of this build ({})",
@@ -386,6 +373,9 @@ fn roll_all<B: GnsKernels>(plan: &Plan, args: &RolloutArgs) -> Result<Vec<Rollou
     let mut model = load_model::<B>(&args.model, &device)?;
     if let Some(bounds) = &plan.bounds {
         model = model.with_bounds(bounds.clone())?;
+    }
+    for previous in previous {
+        previous.remove()?;
     }
     let mut records = Vec::with_capacity(plan.indices.len());
     for (&index, dir) in plan.indices.iter().zip(&plan.dirs) {
@@ -445,27 +435,8 @@ fn roll_one<B: GnsKernels>(
         wall_seconds: 0.0,
         model_seconds: 0.0,
     };
-    // The record first: it marks the folder as ours. Files of an earlier run go.
+    // The record first: it marks the folder as ours.
     write_record(dir, &record)?;
-    for stale in [
-        POSITIONS_FILE,
-        GIF_FILE,
-        VTK_FILES[0],
-        VTK_FILES[1],
-        VTK_FILES[2],
-    ] {
-        let path = dir.join(stale);
-        let removed = if path.is_dir() {
-            std::fs::remove_dir_all(&path)
-        } else {
-            std::fs::remove_file(&path)
-        };
-        match removed {
-            Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => return Err(e).with_context(|| format!("removing {}", path.display())),
-        }
-    }
     let mut vtk = (args.vtk_every > 0)
         .then(|| RolloutVtk::create(dir, plan.dataset.metadata().dt, &trajectory))
         .transpose()?;

@@ -1,6 +1,6 @@
 //! `phi eval` end to end on a tiny dataset and untrained models: every file, the table against
-//! the per-frame curves and the per-trajectory results, resumption from the cache, and the
-//! refusals (another model's cache, a model that does not fit, a missing split, a foreign
+//! the per-frame curves and the per-trajectory results, resumption from the cache, --force, and
+//! the refusals (another model's cache, a model that does not fit, a missing split, a foreign
 //! output directory).
 
 use std::path::Path;
@@ -153,10 +153,17 @@ fn eval_writes_tables_plots_gif_and_resumes_from_its_cache() {
         "{table}"
     );
 
-    // A second run reuses every cached result and writes the same table.
+    // A second run is refused without --force; with it, it reuses every cached result and
+    // writes the same table.
     let cache = out.join("cache/b/test_1.json");
     let before = std::fs::read(&cache).unwrap();
-    let again = ok(eval(&models, &data, &out, &options));
+    let stderr = failed(eval(&models, &data, &out, &options));
+    assert!(
+        stderr.contains("previous `phi eval` output") && stderr.contains("--force"),
+        "{stderr}"
+    );
+    let forced = [&options[..], &["--force"]].concat();
+    let again = ok(eval(&models, &data, &out, &forced));
     assert_eq!(
         std::fs::read_to_string(out.join("table.md")).unwrap(),
         table
@@ -172,7 +179,7 @@ fn eval_writes_tables_plots_gif_and_resumes_from_its_cache() {
         .unwrap()
         .remove("acc_error");
     std::fs::write(&cache, serde_json::to_vec_pretty(&old).unwrap()).unwrap();
-    ok(eval(&models, &data, &out, &options));
+    ok(eval(&models, &data, &out, &forced));
     assert_eq!(
         json(&cache),
         serde_json::from_slice::<serde_json::Value>(&before).unwrap()
@@ -182,16 +189,52 @@ fn eval_writes_tables_plots_gif_and_resumes_from_its_cache() {
         table
     );
 
-    // Other weights under the same name: the cache is refused, naming the entry and both digests.
-    ok(init(&data, &b, &["--seed", "5"]));
+    // A killed evaluation (its record says "complete": false) resumes without --force,
+    // computing only what is not cached, and stale figures of the earlier run go.
+    let unfinished = || {
+        let mut record = json(&out.join("eval.json"));
+        record["complete"] = serde_json::json!(false);
+        std::fs::write(out.join("eval.json"), record.to_string()).unwrap();
+    };
+    unfinished();
+    std::fs::remove_file(out.join("cache/first/test_2.json")).unwrap();
+    let no_gif = [&options[..], &["--frame-every", "0"]].concat();
+    ok(eval(&models, &data, &out, &no_gif));
+    assert_eq!(json(&out.join("eval.json"))["complete"], true);
+    assert!(out.join("cache/first/test_2.json").is_file());
+    assert!(!out.join("rollouts.gif").exists());
+    assert_eq!(std::fs::read(&cache).unwrap(), before);
+
+    // Other weights under the same name: a resumed evaluation refuses the cache, naming the
+    // entry and both digests; with --force the entries are recomputed.
+    ok(init(&data, &b, &["--seed", "5", "--force"]));
+    unfinished();
     let stderr = failed(eval(&models, &data, &out, &options));
     assert!(
-        stderr.contains("test_0.json") && stderr.contains("digest") && stderr.contains("'b'"),
+        stderr.contains("test_0.json")
+            && stderr.contains("digest")
+            && stderr.contains("'b'")
+            && stderr.contains("--force"),
         "{stderr}"
     );
     // ... and other options too.
     let stderr = failed(eval(&models[..1], &data, &out, &["--short-rollout", "7"]));
     assert!(stderr.contains("other options"), "{stderr}");
+    ok(eval(&models, &data, &out, &forced));
+    assert_ne!(std::fs::read(&cache).unwrap(), before);
+    assert_eq!(json(&out.join("eval.json"))["complete"], true);
+
+    // Files it does not write are refused even with --force, and kept; the cache is never
+    // removed.
+    std::fs::write(out.join("cache/notes.txt"), "mine").unwrap();
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    let stderr = failed(eval(&models, &data, &out, &forced));
+    assert!(
+        stderr.contains("'notes.txt'") && stderr.contains("does not write"),
+        "{stderr}"
+    );
+    assert_eq!(std::fs::read(out.join("notes.txt")).unwrap(), b"mine");
+    assert_eq!(std::fs::read(out.join("cache/notes.txt")).unwrap(), b"mine");
     let _ = std::fs::remove_dir_all(dir);
 }
 
@@ -256,15 +299,23 @@ fn eval_refuses_what_does_not_fit() {
         "a refused evaluation wrote {}",
         out.display()
     );
-    // A directory it did not write is refused and left alone.
+    // A directory it did not write is refused, even with --force, and left alone; so is one
+    // holding its file names without its eval.json.
     std::fs::create_dir_all(&out).unwrap();
     std::fs::write(out.join("notes.txt"), "mine").unwrap();
-    let stderr = failed(eval(&m2s, &plane, &out, &[]));
-    assert!(stderr.contains("did not write"), "{stderr}");
+    for force in [&[][..], &["--force"][..]] {
+        let stderr = failed(eval(&m2s, &plane, &out, force));
+        assert!(stderr.contains("does not write"), "{stderr}");
+    }
     assert_eq!(
         std::fs::read_to_string(out.join("notes.txt")).unwrap(),
         "mine"
     );
+    std::fs::remove_file(out.join("notes.txt")).unwrap();
+    std::fs::write(out.join("table.md"), "mine").unwrap();
+    let stderr = failed(eval(&m2s, &plane, &out, &["--force"]));
+    assert!(stderr.contains("no eval.json"), "{stderr}");
+    assert_eq!(std::fs::read(out.join("table.md")).unwrap(), b"mine");
     let _ = std::fs::remove_dir_all(dir);
 }
 
@@ -427,7 +478,14 @@ fn the_floors_join_the_table_and_constant_velocity_rolls_out_straight_lines() {
         &[model.display().to_string()],
         &data,
         &out,
-        &["--floors", "--short-rollout", "5", "--sinkhorn-every", "0"],
+        &[
+            "--floors",
+            "--short-rollout",
+            "5",
+            "--sinkhorn-every",
+            "0",
+            "--force",
+        ],
     ));
     let again = json(&path);
     assert!(again["evaluation"]["plausibility"].is_object(), "{again}");

@@ -199,14 +199,22 @@ fn model_init_writes_a_seeded_model_for_the_dataset() {
     assert_eq!(spec.bounds, metadata.bounds);
     assert_eq!(spec.normalisation.acc_std, metadata.acc_std);
     assert_eq!(spec.provenance["made_by"], "phi model init");
-    // Its own output is rewritten, to the same bytes.
+    // Its own output is refused without --force and rewritten with it, to the same bytes; a
+    // temporary file of a killed write goes with it.
     let weights = std::fs::read(model.join("model.safetensors")).unwrap();
-    ok(init(&data, &model, &["--seed", "3"]));
+    let stderr = failed(init(&data, &model, &["--seed", "3"]));
+    assert!(
+        stderr.contains("previous `phi model init` output") && stderr.contains("--force"),
+        "{stderr}"
+    );
+    std::fs::write(model.join(".model.safetensors.tmp-77"), "").unwrap();
+    ok(init(&data, &model, &["--seed", "3", "--force"]));
     assert_eq!(
         std::fs::read(model.join("model.safetensors")).unwrap(),
         weights
     );
-    ok(init(&data, &model, &["--seed", "4"]));
+    assert!(!model.join(".model.safetensors.tmp-77").exists());
+    ok(init(&data, &model, &["--seed", "4", "--force"]));
     assert_ne!(
         std::fs::read(model.join("model.safetensors")).unwrap(),
         weights
@@ -220,30 +228,43 @@ fn model_init_writes_a_seeded_model_for_the_dataset() {
     let spec = read_spec(&m).unwrap();
     assert!(!spec.config.boundary_features);
     assert_eq!(spec.config.connectivity_radius, 0.05);
-    ok(init(&walls, &m, &["--boundary-features"]));
+    ok(init(&walls, &m, &["--boundary-features", "--force"]));
     assert!(read_spec(&m).unwrap().config.boundary_features);
 
     // A bad size names the option.
     let stderr = failed(init(&data, &dir.join("bad"), &["--hidden", "0"]));
     assert!(stderr.contains("--hidden"), "{stderr}");
-    // Directories it did not write are refused, and left as they were.
+    // Directories it did not write are refused, even with --force, and left as they were: other
+    // files, a model another command wrote, weights without a model.json.
     let foreign = dir.join("foreign");
     std::fs::create_dir_all(&foreign).unwrap();
     std::fs::write(foreign.join("notes.txt"), "mine").unwrap();
-    let stderr = failed(init(&data, &foreign, &[]));
-    assert!(
-        stderr.contains("notes.txt") && stderr.contains("did not write"),
-        "{stderr}"
-    );
     let mut trained = json(&model.join("model.json"));
     trained["provenance"] = serde_json::json!({"made_by": "a training run"});
     std::fs::write(model.join("model.json"), trained.to_string()).unwrap();
-    let stderr = failed(init(&data, &model, &[]));
-    assert!(
-        stderr.contains("model.json") && stderr.contains("a training run"),
-        "{stderr}"
-    );
+    let bare = dir.join("bare");
+    std::fs::create_dir_all(&bare).unwrap();
+    std::fs::write(bare.join("model.safetensors"), "weights").unwrap();
+    for force in [&[][..], &["--force"][..]] {
+        let stderr = failed(init(&data, &foreign, force));
+        assert!(
+            stderr.contains("notes.txt") && stderr.contains("does not write"),
+            "{stderr}"
+        );
+        let stderr = failed(init(&data, &model, force));
+        assert!(
+            stderr.contains("model.json") && stderr.contains("'a training run'"),
+            "{stderr}"
+        );
+        let stderr = failed(init(&data, &bare, force));
+        assert!(stderr.contains("no model.json"), "{stderr}");
+    }
+    assert_eq!(std::fs::read(foreign.join("notes.txt")).unwrap(), b"mine");
     assert_eq!(json(&model.join("model.json")), trained);
+    assert_eq!(
+        std::fs::read(bare.join("model.safetensors")).unwrap(),
+        b"weights"
+    );
     let _ = std::fs::remove_dir_all(dir);
 }
 
@@ -354,8 +375,8 @@ fn rollout_writes_predictions_truth_mse_and_gif() {
     assert_eq!(&gif[..6], b"GIF89a");
     assert_eq!(gif.last(), Some(&0x3B));
 
-    // Its own outputs are rewritten; --mse-every-step prints every step, and -v is the global
-    // flag (backtraces), which rollout accepts like every command.
+    // Its own outputs are rewritten with --force; --mse-every-step prints every step, and -v
+    // is the global flag (backtraces), which rollout accepts like every command.
     let stdout = ok(rollout(
         &model,
         &data,
@@ -367,6 +388,7 @@ fn rollout_writes_predictions_truth_mse_and_gif() {
             "8",
             "--mse-every-step",
             "-v",
+            "--force",
         ],
     ));
     for e in &expected {
@@ -493,7 +515,6 @@ fn rollout_refuses_foreign_outputs_and_missing_trajectories() {
     assert!(stderr.contains("--start 4"), "{stderr}");
     assert!(!out.exists());
 
-    // Files it did not write, beside its own or in place of them, are refused and kept.
     ok(rollout(&model, &data, &out, &["--all"]));
     for i in 0..2 {
         assert_eq!(
@@ -501,17 +522,51 @@ fn rollout_refuses_foreign_outputs_and_missing_trajectories() {
             true
         );
     }
-    std::fs::write(out.join("test_1/notes.txt"), "mine").unwrap();
-    let stderr = failed(rollout(&model, &data, &out, &["--all"]));
+    // An earlier rollout is refused without --force and replaced with it: its files go (no
+    // GIF this time), the other trajectory's folder and the other files of --out stay.
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    let other = std::fs::read(out.join("test_0/rollout.npz")).unwrap();
+    let stderr = failed(rollout(&model, &data, &out, &["--trajectory", "1"]));
     assert!(
-        stderr.contains("notes.txt") && stderr.contains("did not write"),
+        stderr.contains("test_1")
+            && stderr.contains("previous `phi rollout` output")
+            && stderr.contains("--force"),
         "{stderr}"
+    );
+    assert!(out.join("test_1/rollout.gif").is_file());
+    ok(rollout(
+        &model,
+        &data,
+        &out,
+        &["--trajectory", "1", "--frame-every", "0", "--force"],
+    ));
+    assert!(!out.join("test_1/rollout.gif").exists());
+    assert_eq!(json(&out.join("test_1/rollout.json"))["complete"], true);
+    assert_eq!(
+        std::fs::read(out.join("test_0/rollout.npz")).unwrap(),
+        other
+    );
+    assert_eq!(std::fs::read(out.join("notes.txt")).unwrap(), b"mine");
+
+    // Files it did not write, beside its own or in place of them, are refused even with
+    // --force, and kept.
+    std::fs::write(out.join("test_1/notes.txt"), "mine").unwrap();
+    for force in [&["--all"][..], &["--all", "--force"][..]] {
+        let stderr = failed(rollout(&model, &data, &out, force));
+        assert!(
+            stderr.contains("notes.txt") && stderr.contains("does not write"),
+            "{stderr}"
+        );
+    }
+    assert_eq!(
+        std::fs::read(out.join("test_0/rollout.npz")).unwrap(),
+        other
     );
     let foreign = dir.join("foreign");
     std::fs::create_dir_all(foreign.join("test_0")).unwrap();
     std::fs::write(foreign.join("test_0/rollout.npz"), "not ours").unwrap();
-    let stderr = failed(rollout(&model, &data, &foreign, &[]));
-    assert!(stderr.contains("did not write"), "{stderr}");
+    let stderr = failed(rollout(&model, &data, &foreign, &["--force"]));
+    assert!(stderr.contains("no rollout.json"), "{stderr}");
     assert_eq!(
         std::fs::read(foreign.join("test_0/rollout.npz")).unwrap(),
         b"not ours"

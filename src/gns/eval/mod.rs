@@ -14,7 +14,15 @@
 //! - `cache/<model>/<split>_<index>.json`: each trajectory's evaluation, written as soon as it
 //!   is done and reused by a later run with the same model weights, dataset trajectory and
 //!   options, so that a killed evaluation resumes where it stopped. A cache entry of another
-//!   model, trajectory or options is an error naming both, never silently overwritten.
+//!   model, trajectory or options is an error naming both, never silently overwritten (with
+//!   `--force` it is recomputed).
+//!
+//! The output directory must be new or empty, or hold an evaluation of `phi eval` (recognised
+//! by its `eval.json`, [`EVAL_OUTPUTS`]); anything else is refused even with `--force`. An
+//! unfinished evaluation (`"complete": false`: a killed run) is resumed as it is: run the same
+//! command again. A finished one is replaced only with `--force`, which removes its record,
+//! tables, figures and GIF but keeps the cache, so that adding a model to an evaluation or
+//! re-running it recomputes only what is not cached.
 //!
 //! Trajectories are evaluated in parallel (rayon) on the forward backend.
 
@@ -41,6 +49,7 @@ use serde::{Deserialize, Serialize};
 use super::{BoundsFrom, bounds_for};
 use crate::backends::BackendKind;
 use crate::dataset::render::DatasetRenderer;
+use crate::output::target::{Marker, OutputSubdir, Outputs, Previous, previous_output};
 use crate::output::{FrameStyle, GifWriter, OutputError, RgbImage, side_by_side, write_atomic};
 
 /// The value of [`EvalRecord::format`].
@@ -63,6 +72,28 @@ pub const METRICS_PLOT: &str = "metrics.png";
 pub const SCREENING_PLOT: &str = "screening.png";
 /// The rollouts of every model on one trajectory, beside the truth.
 pub const GIF_FILE: &str = "rollouts.gif";
+
+/// What `phi eval` writes, recognised by the `format` of its [`RECORD_FILE`]. The entries of
+/// [`CACHE_DIR`] are checked one by one when read ([`EVAL_FORMAT`]'s cache entries).
+pub const EVAL_OUTPUTS: Outputs = Outputs {
+    command: "phi eval",
+    flag: "--out",
+    files: &[
+        RECORD_FILE,
+        TABLE_MD,
+        TABLE_CSV,
+        ERROR_PLOT,
+        METRICS_PLOT,
+        SCREENING_PLOT,
+        GIF_FILE,
+    ],
+    subdirs: &[OutputSubdir {
+        name: CACHE_DIR,
+        prefix: "",
+        suffix: "",
+    }],
+    marker: Some(Marker::json(RECORD_FILE, "format", EVAL_FORMAT)),
+};
 
 /// Columns of background between the panels of the GIF.
 const GIF_GAP: u32 = 6;
@@ -101,6 +132,11 @@ pub struct EvalArgs {
     /// The output directory.
     #[arg(long)]
     pub out: PathBuf,
+    /// Replace a finished evaluation in --out, reusing its cached trajectory evaluations where
+    /// they fit and recomputing the others (an unfinished one resumes without it; anything
+    /// `phi eval` does not write is refused even with it).
+    #[arg(long)]
+    pub force: bool,
     /// The backend [default: ndarray, as for every command without gradients].
     #[arg(long)]
     pub backend: Option<BackendKind>,
@@ -265,6 +301,8 @@ pub struct Plan {
     models: Vec<ModelEntry>,
     indices: Vec<usize>,
     options: EvalOptions,
+    /// The earlier evaluation in `--out`, to be resumed or replaced.
+    previous: Option<Previous>,
 }
 
 /// Resolves `[NAME=]DIR`: a model directory, or a `phi train` directory whose `best/` model
@@ -479,7 +517,7 @@ pub fn plan(args: &EvalArgs) -> Result<Plan> {
     if !(radius.is_finite() && radius > 0.0) {
         bail!("--density-radius {radius}: must be positive and finite");
     }
-    check_eval_dir(&args.out)?;
+    let previous = check_out(&args.out, args.force)?;
     let options = EvalOptions {
         short_rollout: args.short_rollout,
         ground_cost: match args.emd_cost {
@@ -499,6 +537,7 @@ pub fn plan(args: &EvalArgs) -> Result<Plan> {
         models,
         indices: (0..used).collect(),
         options,
+        previous: Some(previous),
     })
 }
 
@@ -560,37 +599,21 @@ fn same_scenes(dataset: &Dataset, other: &Dataset, split: &str) -> Result<()> {
     Ok(())
 }
 
-/// Refuses an output directory that `phi eval` did not write: a file, or a non-empty directory
-/// without an `eval.json` of [`EVAL_FORMAT`].
+/// The rule of [`EVAL_OUTPUTS`] for `out`, with one exception: an unfinished evaluation (its
+/// `eval.json` says `"complete": false`) is resumed without `force`.
 ///
 /// # Errors
-/// Naming the directory.
-pub fn check_eval_dir(out: &Path) -> Result<()> {
-    if !out.exists() {
-        return Ok(());
-    }
-    if !out.is_dir() {
-        bail!("--out {}: exists and is not a directory", out.display());
-    }
-    let empty = std::fs::read_dir(out)
-        .with_context(|| format!("reading {}", out.display()))?
-        .next()
-        .is_none();
-    if empty {
-        return Ok(());
-    }
-    let format = std::fs::read(out.join(RECORD_FILE))
+/// `out` holds anything `phi eval` does not write, or a finished evaluation and no `force`.
+fn check_out(out: &Path, force: bool) -> Result<Previous> {
+    let previous = previous_output(out, &EVAL_OUTPUTS, force)?;
+    let unfinished = std::fs::read(out.join(RECORD_FILE))
         .ok()
         .and_then(|bytes| serde_json::from_slice::<serde_json::Value>(&bytes).ok())
-        .and_then(|v| v.get("format").and_then(|f| f.as_str()).map(str::to_string));
-    if format.as_deref() != Some(EVAL_FORMAT) {
-        bail!(
-            "--out {}: the directory is not empty and has no {RECORD_FILE} of format \
-             '{EVAL_FORMAT}': `phi eval` did not write it; refusing to write into it",
-            out.display()
-        );
+        .is_some_and(|record| record.get("complete") == Some(&serde_json::Value::Bool(false)));
+    if unfinished {
+        return Ok(previous);
     }
-    Ok(())
+    previous.require_force(force)
 }
 
 /// Runs `phi eval`: evaluates every model on every trajectory (reusing cached results), then
@@ -599,7 +622,11 @@ pub fn check_eval_dir(out: &Path) -> Result<()> {
 /// # Errors
 /// As [`plan`]; a model that does not load; a cache entry of another model or options; I/O.
 pub fn run(args: EvalArgs) -> Result<()> {
-    let plan = plan(&args)?;
+    let mut plan = plan(&args)?;
+    if let Some(previous) = plan.previous.take() {
+        // The record is rewritten at once; the cache is reused where it fits.
+        previous.keep(CACHE_DIR).keep(RECORD_FILE).remove()?;
+    }
     let kind = args.backend.unwrap_or_else(BackendKind::default_forward);
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
@@ -691,7 +718,7 @@ fn evaluate_all<B: GnsKernels>(
         let dir = args.out.join(CACHE_DIR).join(&model.label);
         for (k, &index) in plan.indices.iter().enumerate() {
             let path = dir.join(cache_file_name(&args.split, index));
-            match read_cache(&path, model, &args.split, &plan.options)? {
+            match read_cache(&path, model, &args.split, &plan.options, args.force)? {
                 // An entry from before the stored-unit one-step errors were recorded: only they
                 // are computed.
                 Some(entry) if entry.evaluation.acc_error.is_empty() => {
@@ -885,16 +912,19 @@ pub fn cache_file_name(split: &str, index: usize) -> String {
     format!("{split}_{index}.json")
 }
 
-/// A cache entry that fits `model`, `split` and `options`, `None` when there is none.
+/// A cache entry that fits `model`, `split` and `options`, `None` when there is none, or,
+/// with `replace` (`--force`), when it belongs to other weights, a split or options: it is
+/// then recomputed and overwritten.
 ///
 /// # Errors
-/// An entry that does not read, or that belongs to another model, split, options or trajectory:
-/// the message names the entry and both sides.
+/// An entry that does not read; without `replace`, one that belongs to another model, split,
+/// options or trajectory: the message names the entry and both sides.
 fn read_cache(
     path: &Path,
     model: &ModelEntry,
     split: &str,
     options: &EvalOptions,
+    replace: bool,
 ) -> Result<Option<CacheEntry>> {
     let bytes = match std::fs::read(path) {
         Ok(bytes) => bytes,
@@ -914,45 +944,46 @@ fn read_cache(
             entry.format
         );
     }
-    if entry.digest != model.digest {
-        bail!(
-            "{}: computed for the model {} (weights digest {}), but '{}' is now {} (digest {}): \
-             use another --out, another name (--model NAME=DIR), or delete the entry",
-            path.display(),
+    let mut older = entry.options.clone();
+    older.container.clone_from(&options.container);
+    let (stale, hint) = if entry.digest != model.digest {
+        let stale = format!(
+            "computed for the model {} (weights digest {}), but '{}' is now {} (digest {})",
             entry.model,
             entry.digest,
             model.label,
             model.dir.display(),
             model.digest
         );
-    }
-    if entry.split != split {
-        bail!(
-            "{}: computed on split '{}', not '{split}'",
-            path.display(),
-            entry.split
-        );
-    }
-    let mut older = entry.options.clone();
-    older.container.clone_from(&options.container);
-    if entry.options.container.is_none() && options.container.is_some() && older == *options {
+        (stale, "another name (--model NAME=DIR)")
+    } else if entry.split != split {
+        let stale = format!("computed on split '{}', not '{split}'", entry.split);
+        (stale, "another --split")
+    } else if entry.options.container.is_none() && options.container.is_some() && older == *options
+    {
         // Written before the plausibility figures: the same evaluation, recomputed with them.
         tracing::info!(
             "{}: an evaluation without the plausibility figures, recomputed",
             path.display()
         );
         return Ok(None);
-    }
-    if entry.options != *options {
-        bail!(
-            "{}: computed with other options ({:?}) than this run's ({:?}): use another --out \
-             or the same options",
-            path.display(),
-            entry.options,
-            options
+    } else if entry.options != *options {
+        let stale = format!(
+            "computed with other options ({:?}) than this run's ({:?})",
+            entry.options, options
         );
+        (stale, "the same options")
+    } else {
+        return Ok(Some(entry));
+    };
+    if replace {
+        tracing::info!("{}: recomputed (--force): {stale}", path.display());
+        return Ok(None);
     }
-    Ok(Some(entry))
+    bail!(
+        "{}: {stale}: use another --out, {hint}, or --force to recompute it",
+        path.display()
+    )
 }
 
 /// Writes `value` as pretty JSON, atomically.
