@@ -1,18 +1,20 @@
 //! The command-line form of `phi dataset ...` and `phi render` (parsed by clap in `main.rs`).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use phi_flip::{RandomSceneParams, SceneVariant};
+use phi_gns::data::METADATA_FILE;
 
-use super::export::{ExportFormat, ExportOptions, export};
+use super::export::{EXPORT_OUTPUTS, ExportFormat, ExportOptions, export};
 use super::generate::{GenerateOptions, generate};
 use super::manifest::Shard;
 use super::merge::merge;
 use super::render::render_trajectory;
 use super::stats::{StatsOptions, dataset_stats, format_report};
 use super::{Split, TestScenes};
+use crate::output::target::{Marker, OutputSubdir, Outputs, check_dir};
 
 /// `phi dataset <command>`.
 #[derive(Debug, Subcommand)]
@@ -74,10 +76,12 @@ pub enum DatasetCommand {
         /// The format to write.
         #[arg(long)]
         format: ExportFormat,
-        /// The directory to write into (absent or empty, unless --force).
+        /// The directory to write into: absent or empty, or an earlier export (its export.json)
+        /// with --force.
         #[arg(long)]
         out: PathBuf,
-        /// Replace the content of a non-empty --out.
+        /// Replace an earlier export in --out, once the new one is complete (anything else is
+        /// refused even then).
         #[arg(long)]
         force: bool,
         /// The Python interpreter, with numpy and h5py, for `--format lagrangebench`.
@@ -94,10 +98,12 @@ pub enum DatasetCommand {
         /// Deprecated: the TFRecord directory; pass --data.
         #[arg(hide = true, value_name = "DATA")]
         data_positional: Option<PathBuf>,
-        /// The dataset directory to write (absent or empty, unless --force).
+        /// The dataset directory to write: absent or empty, or an earlier import (its
+        /// import.json) with --force.
         #[arg(long)]
         out: PathBuf,
-        /// Replace the content of a non-empty --out (once the import has succeeded).
+        /// Replace an earlier import in --out, once the new one is complete (anything else is
+        /// refused even then).
         #[arg(long)]
         force: bool,
     },
@@ -269,7 +275,7 @@ pub fn run(command: DatasetCommand) -> Result<()> {
                     out.display()
                 );
             }
-            let staging = prepare_output(&out, force)?;
+            let staging = prepare_output(&out, &EXPORT_OUTPUTS, force)?;
             let written = export(&ExportOptions {
                 dir,
                 format,
@@ -306,7 +312,7 @@ pub fn run(command: DatasetCommand) -> Result<()> {
             force,
         } => {
             let input = crate::cli::dataset_dir("phi dataset import", data, data_positional)?;
-            let staging = prepare_output(&out, force)?;
+            let staging = prepare_output(&out, &IMPORT_OUTPUTS, force)?;
             let imported = (|| -> Result<()> {
                 let bar = crate::progress::counter(
                     "trajectories imported",
@@ -314,6 +320,7 @@ pub fn run(command: DatasetCommand) -> Result<()> {
                 );
                 phi_gns::data::tfrecord::import_tfrecord_with(&input, &staging, &|| bar.inc(1))?;
                 bar.finish_and_clear();
+                write_import_marker(&staging, &input)?;
                 phi_io::publish_dir(&staging, &out)?;
                 Ok(())
             })();
@@ -359,23 +366,45 @@ fn merge_paths(out: Option<PathBuf>, mut shards: Vec<PathBuf>) -> Result<(PathBu
     Ok((out, shards))
 }
 
-/// Checks that the directory `out` of a command that writes a whole directory may be written
-/// (absent, empty, or `force`), and makes the staging directory the command fills: `out` is only
-/// replaced, whole, once everything is written ([`phi_io::publish_dir`]).
-fn prepare_output(out: &std::path::Path, force: bool) -> Result<PathBuf> {
-    super::check_dir(out)?;
-    let occupied = out.is_dir()
-        && std::fs::read_dir(out)
-            .with_context(|| format!("reading {}", out.display()))?
-            .next()
-            .is_some();
-    if occupied && !force {
-        anyhow::bail!(
-            "--out {} is not empty; refusing to write into it (choose another --out, or pass \
-             --force to replace its content once the new content is complete)",
-            out.display()
-        );
-    }
+/// The file that marks a dataset as written by `phi dataset import`, and where from.
+pub const IMPORT_MARKER: &str = "import.json";
+
+/// The `made_by` of [`IMPORT_MARKER`].
+pub const IMPORT_MADE_BY: &str = "phi dataset import";
+
+/// What `phi dataset import` writes: a dataset (metadata.json and a folder of trajectories per
+/// split) and [`IMPORT_MARKER`].
+pub const IMPORT_OUTPUTS: Outputs = Outputs {
+    command: "phi dataset import",
+    flag: "--out",
+    files: &[IMPORT_MARKER, METADATA_FILE],
+    subdirs: &[OutputSubdir {
+        name: "*",
+        prefix: "traj_",
+        suffix: ".npz",
+    }],
+    marker: Some(Marker::json(IMPORT_MARKER, "made_by", IMPORT_MADE_BY)),
+};
+
+/// Writes [`IMPORT_MARKER`] into the imported dataset `dir`.
+fn write_import_marker(dir: &Path, input: &Path) -> Result<()> {
+    let marker = serde_json::json!({
+        "made_by": IMPORT_MADE_BY,
+        "phi_version": env!("CARGO_PKG_VERSION"),
+        "source": input.display().to_string(),
+    });
+    let path = dir.join(IMPORT_MARKER);
+    std::fs::write(&path, serde_json::to_vec_pretty(&marker)?)
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Applies the rule of `outputs` to the directory `out` of a command that writes a whole
+/// directory (absent, empty, or its own earlier output and `force`), and makes the staging
+/// directory the command fills: `out` is only replaced, whole, once everything is written
+/// ([`phi_io::publish_dir`]).
+fn prepare_output(out: &Path, outputs: &Outputs, force: bool) -> Result<PathBuf> {
+    // Nothing is removed now: publishing the staging directory replaces `out` whole.
+    let _replaced = check_dir(out, outputs, force)?;
     if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent)
             .with_context(|| format!("creating {}", parent.display()))?;
@@ -384,7 +413,7 @@ fn prepare_output(out: &std::path::Path, force: bool) -> Result<PathBuf> {
 }
 
 /// `result`, after removing the staging directory if it is an error.
-fn discard_on_error<T>(result: Result<T>, staging: &std::path::Path) -> Result<T> {
+fn discard_on_error<T>(result: Result<T>, staging: &Path) -> Result<T> {
     if result.is_err() {
         let _ = std::fs::remove_dir_all(staging);
     }

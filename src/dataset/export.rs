@@ -5,15 +5,38 @@
 //! phi): the arrays of each split go into a temporary `.npz` in LagrangeBench's layout
 //! ([`phi_gns::data::export::export_lagrangebench_arrays`]), and the script
 //! `lagrangebench_h5.py`, built into the binary, turns it into `{split}.h5`.
+//!
+//! Beside the files of the format, `export.json` says what was exported from where; it marks the
+//! folder as this command's output, which a later export replaces only with `--force`
+//! ([`EXPORT_OUTPUTS`]).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
-use phi_gns::data::Dataset;
 use phi_gns::data::export::{
     export_gns, export_lagrangebench_arrays, write_lagrangebench_metadata,
+};
+use phi_gns::data::{Dataset, METADATA_FILE};
+
+use crate::output::target::{Marker, Outputs};
+
+/// The file that marks a folder as an export of phi: who wrote it, from which dataset, in
+/// which format.
+pub const EXPORT_MARKER: &str = "export.json";
+
+/// The `made_by` of [`EXPORT_MARKER`].
+pub const EXPORT_MADE_BY: &str = "phi dataset export";
+
+/// What `phi dataset export` writes, in every format: the files of each split, the format's
+/// metadata.json and [`EXPORT_MARKER`].
+pub const EXPORT_OUTPUTS: Outputs = Outputs {
+    command: "phi dataset export",
+    flag: "--out",
+    files: &[EXPORT_MARKER, METADATA_FILE, "*.npz", "*.tfrecord", "*.h5"],
+    subdirs: &[],
+    marker: Some(Marker::json(EXPORT_MARKER, "made_by", EXPORT_MADE_BY)),
 };
 
 /// The script that writes LagrangeBench's HDF5 files.
@@ -59,6 +82,15 @@ pub fn export(options: &ExportOptions) -> Result<Vec<(String, usize)>> {
     let dataset = Dataset::open(&options.dir)?;
     let out = &options.out;
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let marker = serde_json::json!({
+        "made_by": EXPORT_MADE_BY,
+        "phi_version": env!("CARGO_PKG_VERSION"),
+        "format": format!("{:?}", options.format).to_lowercase(),
+        "dataset": options.dir.display().to_string(),
+    });
+    let path = out.join(EXPORT_MARKER);
+    std::fs::write(&path, serde_json::to_vec_pretty(&marker)?)
+        .with_context(|| format!("cannot write {}", path.display()))?;
     let total: usize = dataset.metadata().splits.values().sum();
     let bar = crate::progress::count_bar(total, "trajectories", options.progress);
     let mut tick = || bar.inc(1);

@@ -28,9 +28,9 @@ use super::manifest::{
     GENERATE_OUTPUTS, GeneratorConfig, MANIFEST, Manifest, Shard, read_generator, read_manifest,
     write_dataset_metadata, write_manifest,
 };
-use super::{Split, TestScenes, check_dir, position_scale, simulate_trajectory, trajectory_seed};
+use super::{Split, TestScenes, position_scale, simulate_trajectory, trajectory_seed};
 use crate::memory::check_memory;
-use crate::output::target::check_dir as check_outputs;
+use crate::output::target::{check_dir as check_outputs, check_not_a_file};
 
 /// What `phi dataset generate` does.
 #[derive(Debug, Clone)]
@@ -98,7 +98,7 @@ struct Job {
 pub fn generate(options: &GenerateOptions) -> Result<GenerateSummary> {
     let started = Instant::now();
     let out = &options.out;
-    check_dir(out)?;
+    check_not_a_file(out, "--out")?;
     let config = GeneratorConfig::new(
         options.variant,
         options.seed,

@@ -352,13 +352,3 @@ pub fn position_scale(resolution: [usize; 2], scale: Option<f64>) -> (f32, f32) 
     }
 }
 
-/// Checks that `path` is a directory or does not exist.
-///
-/// # Errors
-/// When it is a file.
-pub fn check_dir(path: &Path) -> Result<()> {
-    if path.exists() && !path.is_dir() {
-        bail!("{} exists and is not a directory", path.display());
-    }
-    Ok(())
-}

@@ -6,6 +6,7 @@ use std::process::{Command, Output};
 
 use phi::phi_gns::data::{Dataset, read_metadata, read_trajectory};
 
+use super::rollout::json;
 use super::{ok, phi, scratch};
 
 /// `phi dataset generate --out OUT --steps 2 --trajectories N --split SPLIT [extra]`.
@@ -276,23 +277,44 @@ fn import_export_and_render_never_overwrite_data_unless_forced() {
     let other = dir.join("other");
     ok(generate(&data, "train", 2, &[]));
     ok(generate(&other, "train", 1, &["--seed", "5"]));
-    let records = dir.join("records");
-    ok(run(
-        &["dataset", "export", "--format", "tfrecord", "--out"],
-        &[&records, Path::new("--data"), &other],
-    ));
+    let (records, two) = (dir.join("records"), dir.join("two"));
+    for (out, from) in [(&records, &other), (&two, &data)] {
+        ok(run(
+            &["dataset", "export", "--format", "tfrecord", "--out"],
+            &[out, Path::new("--data"), from],
+        ));
+    }
+    let import = |out: &Path, from: &Path, force: &[&str]| {
+        run(
+            &[&["dataset", "import"], force, &["--out"]].concat(),
+            &[out, Path::new("--data"), from],
+        )
+    };
 
-    // Import over a dataset: refused, the dataset untouched.
+    // Import over a dataset it did not write: refused even with --force, the dataset untouched.
     let before = snapshot(&data);
-    let stderr = fails(run(
-        &["dataset", "import", "--out"],
-        &[&data, Path::new("--data"), &records],
-    ));
+    for force in [&[][..], &["--force"][..]] {
+        let stderr = fails(import(&data, &records, force));
+        assert!(
+            stderr.contains("does not write") && stderr.contains("phi dataset import"),
+            "{stderr}"
+        );
+    }
+    assert_eq!(snapshot(&data), before);
+    // Over its own import: refused without --force.
+    let imported = dir.join("imported");
+    ok(import(&imported, &two, &[]));
+    assert_eq!(
+        json(&imported.join("import.json"))["made_by"],
+        "phi dataset import"
+    );
+    let before = snapshot(&imported);
+    let stderr = fails(import(&imported, &records, &[]));
     assert!(
-        stderr.contains("not empty") && stderr.contains("--force"),
+        stderr.contains("previous `phi dataset import` output") && stderr.contains("--force"),
         "{stderr}"
     );
-    assert_eq!(snapshot(&data), before);
+    assert_eq!(snapshot(&imported), before);
     // A failing import (a damaged record) with --force leaves the old dataset whole.
     let damaged = dir.join("damaged");
     std::fs::create_dir_all(&damaged).unwrap();
@@ -301,45 +323,80 @@ fn import_export_and_render_never_overwrite_data_unless_forced() {
     let middle = bytes.len() / 2;
     bytes[middle] ^= 0xFF;
     std::fs::write(damaged.join("train.tfrecord"), &bytes).unwrap();
-    fails(run(
-        &["dataset", "import", "--force", "--out"],
-        &[&data, Path::new("--data"), &damaged],
-    ));
-    assert_eq!(snapshot(&data), before);
-    // With --force a good import replaces it whole.
-    ok(run(
-        &["dataset", "import", "--force", "--out"],
-        &[&data, Path::new("--data"), &records],
-    ));
-    assert_eq!(read_metadata(&data).unwrap().splits["train"], 1);
+    fails(import(&imported, &damaged, &["--force"]));
+    assert_eq!(snapshot(&imported), before);
+    // With --force a good import replaces it whole; nothing beside it is touched.
+    std::fs::write(dir.join("beside.txt"), "mine").unwrap();
+    ok(import(&imported, &records, &["--force"]));
+    assert_eq!(read_metadata(&imported).unwrap().splits["train"], 1);
     assert_eq!(
-        read_trajectory(&data.join("train/traj_00000.npz")).unwrap(),
+        read_trajectory(&imported.join("train/traj_00000.npz")).unwrap(),
         read_trajectory(&other.join("train/traj_00000.npz")).unwrap()
     );
-    assert!(!data.join("train/traj_00001.npz").exists());
+    assert!(!imported.join("train/traj_00001.npz").exists());
+    assert_eq!(std::fs::read(dir.join("beside.txt")).unwrap(), b"mine");
     let leftovers: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .filter(|n| n.starts_with('.'))
         .collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
+    // A file it does not write inside its import: refused even with --force.
+    std::fs::write(imported.join("train/notes.txt"), "mine").unwrap();
+    let stderr = fails(import(&imported, &records, &["--force"]));
+    assert!(stderr.contains("'train/notes.txt'"), "{stderr}");
+    std::fs::remove_file(imported.join("train/notes.txt")).unwrap();
 
-    // Export into a folder holding anything: refused; into the dataset itself: refused.
+    // Export into a folder holding anything else, or a dataset: refused even with --force;
+    // into the dataset itself: refused.
+    let export = |out: &Path, from: &Path, force: &[&str]| {
+        run(
+            &[&["dataset", "export", "--format", "npz"], force, &["--out"]].concat(),
+            &[out, Path::new("--data"), from],
+        )
+    };
     let notes = dir.join("notes");
     std::fs::create_dir_all(&notes).unwrap();
     std::fs::write(notes.join("a.txt"), "mine").unwrap();
-    let stderr = fails(run(
-        &["dataset", "export", "--format", "npz", "--out"],
-        &[&notes, Path::new("--data"), &other],
-    ));
-    assert!(stderr.contains("not empty"), "{stderr}");
+    let before = snapshot(&imported);
+    for force in [&[][..], &["--force"][..]] {
+        let stderr = fails(export(&notes, &other, force));
+        assert!(
+            stderr.contains("'a.txt'") && stderr.contains("does not write"),
+            "{stderr}"
+        );
+        let stderr = fails(export(&imported, &other, force));
+        assert!(stderr.contains("does not write"), "{stderr}");
+    }
     assert_eq!(std::fs::read(notes.join("a.txt")).unwrap(), b"mine");
-    let stderr = fails(run(
-        &["dataset", "export", "--format", "npz", "--force", "--out"],
-        &[&other, Path::new("--data"), &other],
-    ));
+    assert_eq!(snapshot(&imported), before);
+    let stderr = fails(export(&other, &other, &["--force"]));
     assert!(stderr.contains("holds the dataset"), "{stderr}");
     Dataset::open(&other).unwrap();
+    // Over its own export: refused without --force, replaced whole with it (another format's
+    // files go); the same files without its export.json are not its own.
+    let arrays = dir.join("arrays");
+    ok(export(&arrays, &other, &[]));
+    let before = snapshot(&arrays);
+    let stderr = fails(export(&arrays, &data, &[]));
+    assert!(
+        stderr.contains("previous `phi dataset export` output") && stderr.contains("--force"),
+        "{stderr}"
+    );
+    assert_eq!(snapshot(&arrays), before);
+    ok(run(
+        &[
+            "dataset", "export", "--format", "tfrecord", "--force", "--out",
+        ],
+        &[&arrays, Path::new("--data"), &data],
+    ));
+    assert!(arrays.join("train.tfrecord").is_file() && !arrays.join("train.npz").exists());
+    assert_eq!(json(&arrays.join("export.json"))["format"], "tfrecord");
+    std::fs::remove_file(arrays.join("export.json")).unwrap();
+    let before = snapshot(&arrays);
+    let stderr = fails(export(&arrays, &data, &["--force"]));
+    assert!(stderr.contains("no export.json"), "{stderr}");
+    assert_eq!(snapshot(&arrays), before);
 
     // Render over a file that is not a GIF: refused, even with --force; a new GIF is drawn;
     // over a GIF: refused, redrawn with --force.
