@@ -4,9 +4,282 @@
 //! frames `start + 1 ..= start + steps`. Kinematic particles (obstacles, walls) take their next
 //! positions from the ground truth at every step, as in DeepMind's evaluation, so a rollout
 //! cannot run past the trajectory's last frame.
+//!
+//! [`Rollout`] is the one stepper every rollout goes through (`phi rollout`, screening, `phi
+//! eval`, the pushforward loss, the inverse problems): the window stays on the device, each step
+//! predicts, puts the kinematic particles where they must be by a tensor select and slides the
+//! window. The radius graph of the new positions is built on the host, so their values are read
+//! back once per step; a caller that reads the frame ([`Rollout::read`]) shares that read.
+//! [`TrajectoryRollout`] drives it over a trajectory as an iterator of frames.
+//!
+//! ```no_run
+//! # use phi_gns::{data::Trajectory, model::Gns, rollout::{RolloutRange, TrajectoryRollout}};
+//! # fn demo(model: &Gns<phi_core::backend::ndarray::NdArray>, trajectory: &Trajectory)
+//! #     -> Result<(), phi_gns::model::ModelError> {
+//! let c = model.spec().config.input_velocities;
+//! let range = RolloutRange::full(c, trajectory.frames);
+//! for frame in TrajectoryRollout::new(model, trajectory, range, &Default::default())? {
+//!     let frame = frame?;
+//!     println!("frame {}: first particle at {:?}", frame.frame, &frame.positions[..2]);
+//! }
+//! # Ok(()) }
+//! ```
+
+use phi_core::tensor::Tensor;
 
 use crate::data::Trajectory;
 use crate::model::{Gns, GnsKernels, GraphBatch, ModelError};
+
+/// A model stepping a window forward on the device, its predictions fed back.
+///
+/// Each [`Rollout::step`] predicts every particle's next positions, replaces those of the
+/// kinematic particles (the model's `kinematic_types`) by the positions the caller gives, and
+/// slides the window one frame on (the oldest frame dropped, the radius graph rebuilt per
+/// example). Gradients flow through the steps when the window or the parameters carry them.
+#[derive(Debug)]
+pub struct Rollout<'m, B: GnsKernels> {
+    model: &'m Gns<B>,
+    window: GraphBatch<B>,
+    /// `[N, 1]`: 1 where a particle follows the model, 0 where it is kinematic.
+    follows_model: Tensor<B>,
+    /// The positions of the last step, not yet slid into the window, and their host values
+    /// once read.
+    pending: Option<(Tensor<B>, Option<Vec<f32>>)>,
+}
+
+impl<'m, B: GnsKernels> Rollout<'m, B> {
+    /// A rollout of `model` from the window and graph of `window`.
+    ///
+    /// # Errors
+    /// [`ModelError::Input`] when `window` does not fit the model.
+    pub fn new(model: &'m Gns<B>, window: GraphBatch<B>) -> Result<Self, ModelError> {
+        let spec = model.spec();
+        let shape = window.positions().shape();
+        if shape[1] != spec.config.input_velocities + 1 || shape[2] != spec.config.dim {
+            return Err(ModelError::Input {
+                what: "rollout window",
+                reason: format!(
+                    "shape {shape:?}; the model reads [particles, {}, {}]",
+                    spec.config.input_velocities + 1,
+                    spec.config.dim
+                ),
+            });
+        }
+        let follows: Vec<f32> = window
+            .types()
+            .iter()
+            .map(|t| f32::from(u8::from(!spec.kinematic_types.contains(t))))
+            .collect();
+        let device = window.positions().device();
+        let follows_model = Tensor::from_vec(follows, &[shape[0], 1], &device)?;
+        Self::with_mask(model, window, &follows_model)
+    }
+
+    /// A rollout in which the particles where `mask` (`[N]` or `[N, 1]`) is 0 are kinematic,
+    /// whatever their types: a loss's mask of the particles it counts.
+    ///
+    /// # Errors
+    /// [`ModelError::Input`] when `window` does not fit the model or `mask` the window.
+    pub fn with_mask(
+        model: &'m Gns<B>,
+        window: GraphBatch<B>,
+        mask: &Tensor<B>,
+    ) -> Result<Self, ModelError> {
+        let n = window.positions().shape()[0];
+        if mask.numel() != n || mask.shape().len() > 2 {
+            return Err(ModelError::Input {
+                what: "rollout mask",
+                reason: format!("shape {:?} for {n} particles", mask.shape()),
+            });
+        }
+        Ok(Rollout {
+            model,
+            window,
+            follows_model: mask.reshape(&[n, 1])?,
+            pending: None,
+        })
+    }
+
+    /// The window the next step reads: `[N, C + 1, dim]`, its graph and types.
+    ///
+    /// # Errors
+    /// As [`Rollout::step`], for sliding the last step's positions in.
+    pub fn window(&mut self) -> Result<&GraphBatch<B>, ModelError> {
+        self.slide()?;
+        Ok(&self.window)
+    }
+
+    /// One step: the next positions `[N, dim]` of every particle, the kinematic ones taken from
+    /// `kinematic` (`[N, dim]`; only their rows are read).
+    ///
+    /// # Errors
+    /// [`ModelError::Input`] when `kinematic` is not `[N, dim]`; [`ModelError::Graph`] when the
+    /// previous step's positions were not finite (a caller that reads them can name the
+    /// particle first); shape errors from the network.
+    pub fn step(&mut self, kinematic: &Tensor<B>) -> Result<&Tensor<B>, ModelError> {
+        self.slide()?;
+        let normalised = self.model.normalised_acceleration(&self.window)?;
+        self.step_with(&normalised, kinematic)
+    }
+
+    /// [`Rollout::step`] from the network's output on the current window (`[N, dim]`
+    /// normalised accelerations, from [`Gns::normalised_acceleration`] of
+    /// [`Rollout::window`]), for a caller that needs that output too (a multi-step loss).
+    ///
+    /// # Errors
+    /// As [`Rollout::step`].
+    pub fn step_with(
+        &mut self,
+        normalised: &Tensor<B>,
+        kinematic: &Tensor<B>,
+    ) -> Result<&Tensor<B>, ModelError> {
+        self.slide()?;
+        let predicted = self.model.integrate(&self.window, normalised)?;
+        if kinematic.shape() != predicted.shape() {
+            return Err(ModelError::Input {
+                what: "kinematic positions",
+                reason: format!(
+                    "shape {:?} for next positions {:?}",
+                    kinematic.shape(),
+                    predicted.shape()
+                ),
+            });
+        }
+        let next = Tensor::select(&self.follows_model, &predicted, kinematic)?;
+        Ok(&self.pending.insert((next, None)).0)
+    }
+
+    /// The host values of the last step's positions (`[N, dim]` row-major), read once: the
+    /// next step builds its graph from the same values. Empty before the first step.
+    pub fn read(&mut self) -> &[f32] {
+        match &mut self.pending {
+            Some((next, host)) => host.get_or_insert_with(|| next.to_vec()),
+            None => &[],
+        }
+    }
+
+    /// Slides the last step's positions into the window.
+    fn slide(&mut self) -> Result<(), ModelError> {
+        if let Some((next, host)) = self.pending.take() {
+            let spec = self.model.spec();
+            self.window = match host {
+                Some(host) => self.window.advance_from(&next, &host, spec)?,
+                None => self.window.advance(&next, spec)?,
+            };
+        }
+        Ok(())
+    }
+}
+
+/// One predicted frame of a [`TrajectoryRollout`].
+#[derive(Debug, Clone)]
+pub struct RolloutFrame<B: phi_core::Backend> {
+    /// The rollout step, counted from 1.
+    pub step: usize,
+    /// The trajectory frame it predicts (`start + step`).
+    pub frame: usize,
+    /// The positions `[N, dim]` row-major, in stored units (kinematic particles at the truth).
+    pub positions: Vec<f32>,
+    /// The same positions on the device.
+    pub tensor: Tensor<B>,
+}
+
+/// A [`Rollout`] over a trajectory: an iterator of the predicted frames
+/// `start + 1 ..= start + steps`, kinematic particles following the ground truth. It stops after
+/// the first error: a non-finite position is [`ModelError::NonFinitePrediction`], naming the
+/// step, the frame and the particle, and every frame before it has been yielded.
+#[derive(Debug)]
+pub struct TrajectoryRollout<'a, B: GnsKernels> {
+    stepper: Rollout<'a, B>,
+    trajectory: &'a Trajectory,
+    range: RolloutRange,
+    device: B::Device,
+    dim: usize,
+    step: usize,
+    stopped: bool,
+}
+
+impl<'a, B: GnsKernels> TrajectoryRollout<'a, B> {
+    /// The rollout of `model` on `trajectory` over `range`.
+    ///
+    /// # Errors
+    /// [`ModelError::Input`] for a range or trajectory that does not fit the model; graph
+    /// errors for a non-finite input window.
+    pub fn new(
+        model: &'a Gns<B>,
+        trajectory: &'a Trajectory,
+        range: RolloutRange,
+        device: &B::Device,
+    ) -> Result<Self, ModelError> {
+        let config = &model.spec().config;
+        let (dim, c) = (config.dim, config.input_velocities);
+        if trajectory.dim != dim {
+            return Err(ModelError::Input {
+                what: "trajectory",
+                reason: format!("{}D positions for a {dim}D model", trajectory.dim),
+            });
+        }
+        range.check(c, trajectory.frames)?;
+        let window = input_window(trajectory, range.start, c);
+        let batch =
+            GraphBatch::from_host(&window, &trajectory.particle_type, model.spec(), device)?;
+        Ok(TrajectoryRollout {
+            stepper: Rollout::new(model, batch)?,
+            trajectory,
+            range,
+            device: device.clone(),
+            dim,
+            step: 0,
+            stopped: false,
+        })
+    }
+
+    /// The next frame, or `None` after the last one or an error.
+    fn advance(&mut self) -> Result<RolloutFrame<B>, ModelError> {
+        let step = self.step + 1;
+        let frame = self.range.start + step;
+        let n = self.trajectory.particles;
+        let truth = Tensor::from_slice(self.trajectory.frame(frame), &[n, self.dim], &self.device)?;
+        let tensor = self.stepper.step(&truth)?.clone();
+        let positions = self.stepper.read().to_vec();
+        if let Some(bad) = positions.iter().position(|x| !x.is_finite()) {
+            return Err(ModelError::NonFinitePrediction {
+                step,
+                frame,
+                particle: bad / self.dim,
+            });
+        }
+        self.step = step;
+        Ok(RolloutFrame {
+            step,
+            frame,
+            positions,
+            tensor,
+        })
+    }
+}
+
+impl<B: GnsKernels> Iterator for TrajectoryRollout<'_, B> {
+    type Item = Result<RolloutFrame<B>, ModelError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.stopped || self.step >= self.range.steps {
+            return None;
+        }
+        let frame = self.advance();
+        self.stopped = frame.is_err();
+        Some(frame)
+    }
+
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        let left = if self.stopped {
+            0
+        } else {
+            self.range.steps - self.step
+        };
+        (0, Some(left))
+    }
+}
 
 /// Where a rollout starts and how far it runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -77,45 +350,9 @@ pub fn rollout<B: GnsKernels>(
     device: &B::Device,
     mut on_frame: impl FnMut(usize, &[f32]) -> Result<(), ModelError>,
 ) -> Result<(), ModelError> {
-    let config = &model.spec().config;
-    let (dim, c) = (config.dim, config.input_velocities);
-    if trajectory.dim != dim {
-        return Err(ModelError::Input {
-            what: "trajectory",
-            reason: format!("{}D positions for a {dim}D model", trajectory.dim),
-        });
-    }
-    range.check(c, trajectory.frames)?;
-    let n = trajectory.particles;
-    let kinematic: Vec<bool> = trajectory
-        .particle_type
-        .iter()
-        .map(|t| model.spec().kinematic_types.contains(t))
-        .collect();
-    let mut history: Vec<Vec<f32>> = (range.start - c..=range.start)
-        .map(|t| trajectory.frame(t).to_vec())
-        .collect();
-    let mut window = vec![0.0f32; n * (c + 1) * dim];
-    for step in 1..=range.steps {
-        fill_window(&history, n, dim, &mut window);
-        let batch =
-            GraphBatch::from_host(&window, &trajectory.particle_type, model.spec(), device)?;
-        let mut next = model.next_positions(&batch)?.to_vec();
-        let frame = range.start + step;
-        let truth = trajectory.frame(frame);
-        for (i, _) in kinematic.iter().enumerate().filter(|(_, k)| **k) {
-            next[i * dim..(i + 1) * dim].copy_from_slice(&truth[i * dim..(i + 1) * dim]);
-        }
-        if let Some(bad) = next.iter().position(|x| !x.is_finite()) {
-            return Err(ModelError::NonFinitePrediction {
-                step,
-                frame,
-                particle: bad / dim,
-            });
-        }
-        on_frame(step, &next)?;
-        history.remove(0);
-        history.push(next);
+    for frame in TrajectoryRollout::new(model, trajectory, range, device)? {
+        let frame = frame?;
+        on_frame(frame.step, &frame.positions)?;
     }
     Ok(())
 }

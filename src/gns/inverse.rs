@@ -27,6 +27,7 @@ use phi_flip::optimize::Forward;
 use phi_flip::{FlipError, OptimizeProblem};
 use phi_gns::data::{LIQUID, OBSTACLE};
 use phi_gns::model::{Gns, GnsKernels, GraphBatch, load_model};
+use phi_gns::rollout::Rollout;
 
 /// A trained GNS rolled out over an optimisation's scene, differentiably.
 pub struct GnsForward<B: GnsKernels> {
@@ -150,18 +151,16 @@ impl<B: GnsKernels + LatticeKernels> GnsForward<B> {
         let mut types = vec![LIQUID; n];
         types.extend(std::iter::repeat_n(OBSTACLE, m));
         let host = window.to_vec();
-        let mut batch =
-            GraphBatch::from_host(&host, &types, spec, &device)?.with_positions(window)?;
+        let batch = GraphBatch::from_host(&host, &types, spec, &device)?.with_positions(window)?;
+        let mut rollout = Rollout::new(&self.model, batch)?;
+        // The obstacles are kinematic: each step puts them back where they are (the liquid's
+        // rows are the model's).
+        let kinematic = Tensor::concat(&[Tensor::zeros(&[n, d], &device), obstacles], 0)?;
         let mut liquid = stored;
-        // A non-finite prediction stops the next regraph with an error naming it; one in the
-        // last frame makes the loss non-finite, which the optimiser reports.
-        for step in 0..self.steps {
-            let next = self.model.next_positions(&batch)?;
-            liquid = next.narrow(0, 0..n)?;
-            if step + 1 < self.steps {
-                let next = Tensor::concat(&[liquid.clone(), obstacles.clone()], 0)?;
-                batch = batch.advance(&next, spec)?;
-            }
+        // A non-finite prediction stops the next step's graph with an error naming it; one in
+        // the last frame makes the loss non-finite, which the optimiser reports.
+        for _ in 0..self.steps {
+            liquid = rollout.step(&kinematic)?.narrow(0, 0..n)?;
         }
         Ok(&(&liquid - self.offset) * (1.0 / self.scale))
     }

@@ -44,6 +44,7 @@ pub mod network;
 pub mod params;
 
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use phi_core::error::TensorError;
 use phi_core::tensor::{IntTensor, Tensor};
@@ -171,6 +172,8 @@ pub enum ModelError {
 pub struct GraphBatch<B: phi_core::Backend> {
     positions: Tensor<B>,
     particle_type: IntTensor<B>,
+    /// The same types on the host, checked against the model once, when the batch was made.
+    types: Arc<[i64]>,
     senders: IntTensor<B>,
     receivers: IntTensor<B>,
     graph: RadiusGraph,
@@ -187,6 +190,19 @@ impl<B: phi_core::Backend> GraphBatch<B> {
     pub fn new(
         positions: Tensor<B>,
         particle_type: IntTensor<B>,
+        graph: RadiusGraph,
+        spec: &ModelSpec,
+    ) -> Result<Self, ModelError> {
+        let types: Arc<[i64]> = particle_type.to_vec().into();
+        Self::checked(positions, particle_type, types, graph, spec)
+    }
+
+    /// [`GraphBatch::new`] with the types also on the host (`types` must be `particle_type`'s
+    /// values): everything is checked, nothing is read back from the device.
+    fn checked(
+        positions: Tensor<B>,
+        particle_type: IntTensor<B>,
+        types: Arc<[i64]>,
         graph: RadiusGraph,
         spec: &ModelSpec,
     ) -> Result<Self, ModelError> {
@@ -213,7 +229,6 @@ impl<B: phi_core::Backend> GraphBatch<B> {
                 ),
             });
         }
-        let types = particle_type.to_vec();
         if let Some(t) = types
             .iter()
             .find(|&&t| t < 0 || t as usize >= config.particle_types)
@@ -226,11 +241,23 @@ impl<B: phi_core::Backend> GraphBatch<B> {
                 ),
             });
         }
+        Self::assemble(positions, particle_type, types, graph)
+    }
+
+    /// A batch of parts that are known to fit each other and the model (the particles and types
+    /// of a batch that was checked, the graph of its new positions): no check, no read-back.
+    fn assemble(
+        positions: Tensor<B>,
+        particle_type: IntTensor<B>,
+        types: Arc<[i64]>,
+        graph: RadiusGraph,
+    ) -> Result<Self, ModelError> {
         let device = positions.device();
         let (senders, receivers) = graph.to_tensors::<B>(&device)?;
         Ok(GraphBatch {
             positions,
             particle_type,
+            types,
             senders,
             receivers,
             graph,
@@ -297,8 +324,8 @@ impl<B: phi_core::Backend> GraphBatch<B> {
             .flat_map(|(_, t)| t.iter().copied())
             .collect();
         let positions = Tensor::from_vec(data, &[n, window, dim], device)?;
-        let particle_type = IntTensor::from_vec(types, &[n], device)?;
-        Self::new(positions, particle_type, graph, spec)
+        let particle_type = IntTensor::from_vec(types.clone(), &[n], device)?;
+        Self::checked(positions, particle_type, types.into(), graph, spec)
     }
 
     /// The positions `[N, C + 1, dim]`.
@@ -309,6 +336,11 @@ impl<B: phi_core::Backend> GraphBatch<B> {
     /// The particle types `[N]`.
     pub fn particle_type(&self) -> &IntTensor<B> {
         &self.particle_type
+    }
+
+    /// The particle types `[N]` on the host.
+    pub fn types(&self) -> &[i64] {
+        &self.types
     }
 
     /// The radius graph.
@@ -362,8 +394,19 @@ impl<B: phi_core::Backend> GraphBatch<B> {
                 ),
             });
         }
-        let dim = spec.config.dim;
         let latest = features::latest_positions(&positions)?.to_vec();
+        self.regraph_from(positions, &latest, spec)
+    }
+
+    /// [`GraphBatch::regraph`] with the latest positions already on the host (`latest`,
+    /// `[N, dim]`, the values of the window's last frame).
+    fn regraph_from(
+        &self,
+        positions: Tensor<B>,
+        latest: &[f32],
+        spec: &ModelSpec,
+    ) -> Result<Self, ModelError> {
+        let dim = spec.config.dim;
         let examples: Vec<ExamplePositions<'_>> = self
             .graph
             .node_offsets()
@@ -373,7 +416,12 @@ impl<B: phi_core::Backend> GraphBatch<B> {
             })
             .collect();
         let graph = RadiusGraph::for_batch(&examples, dim, spec.config.connectivity_radius)?;
-        Self::new(positions, self.particle_type.clone(), graph, spec)
+        Self::assemble(
+            positions,
+            self.particle_type.clone(),
+            self.types.clone(),
+            graph,
+        )
     }
 
     /// The window one frame on: the oldest position of every particle dropped, `next`
@@ -397,7 +445,21 @@ impl<B: phi_core::Backend> GraphBatch<B> {
         }
         let kept = self.positions.narrow(1, 1..window)?;
         let positions = Tensor::concat(&[kept, next.unsqueeze(1)?], 1)?;
-        self.regraph(positions, spec)
+        self.regraph_from(positions, &next.to_vec(), spec)
+    }
+
+    /// [`GraphBatch::advance`] with `next`'s values already on the host (`host`, `[N, dim]`
+    /// row-major): the step of a rollout, whose caller reads each frame anyway.
+    pub(crate) fn advance_from(
+        &self,
+        next: &Tensor<B>,
+        host: &[f32],
+        spec: &ModelSpec,
+    ) -> Result<Self, ModelError> {
+        let window = self.positions.shape()[1];
+        let kept = self.positions.narrow(1, 1..window)?;
+        let positions = Tensor::concat(&[kept, next.unsqueeze(1)?], 1)?;
+        self.regraph_from(positions, host, spec)
     }
 }
 

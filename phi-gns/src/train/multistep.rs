@@ -22,6 +22,7 @@ use phi_core::tensor::Tensor;
 
 use super::loss::{ErrorNorm, counted_particles, masked_error};
 use crate::model::{Gns, GnsKernels, GraphBatch, ModelError};
+use crate::rollout::Rollout;
 
 /// The multi-step loss of `model` (see the [module docs](self)): the mean over steps
 /// `0 ..= n` of the one-step losses, `n = truth.shape()[1] − 2`.
@@ -58,14 +59,11 @@ pub fn multi_step_loss<B: GnsKernels>(
         counted,
         norm,
     )?;
-    let follows_model = free_particles(mask)?;
-    let mut window = batch.clone();
+    let mut rollout = Rollout::with_mask(model, batch.clone(), mask)?;
     let mut predicted = predicted;
     for i in 1..=steps {
-        let positions = model.integrate(&window, &predicted)?;
-        let next = Tensor::select(&follows_model, &positions, &truth_frame(truth, i)?)?;
-        window = window.advance(&next, model.spec())?;
-        predicted = model.normalised_acceleration(&window)?;
+        rollout.step_with(&predicted, &truth_frame(truth, i)?)?;
+        predicted = model.normalised_acceleration(rollout.window()?)?;
         let target = true_acceleration(model, truth, i)?;
         total = total + masked_error(&predicted, &target, mask, counted, norm)?;
     }
@@ -115,12 +113,4 @@ pub(crate) fn true_acceleration<B: GnsKernels>(
         .binary(phi_core::backend::BinaryOp::Sub, &(&latest * 2.0))?
         + truth_frame(truth, i - 1)?;
     model.normalise_acceleration(&acceleration)
-}
-
-/// `[N, 1]`: 1 where a particle follows the model (it counts in the loss), 0 where it follows
-/// the ground truth; broadcasts over the axes in [`Tensor::select`].
-pub(crate) fn free_particles<B: phi_core::Backend>(
-    mask: &Tensor<B>,
-) -> Result<Tensor<B>, ModelError> {
-    Ok(mask.reshape(&[mask.numel(), 1])?)
 }

@@ -44,9 +44,10 @@ use rand::Rng;
 use serde::{Deserialize, Serialize};
 
 use super::loss::{ErrorNorm, acceleration_loss, counted_particles};
-use super::multistep::{extra_steps, free_particles, true_acceleration, truth_frame};
+use super::multistep::{extra_steps, true_acceleration, truth_frame};
 use super::one_step_loss;
 use crate::model::{Gns, GnsKernels, GraphBatch, ModelError};
+use crate::rollout::Rollout;
 
 /// The schedule of pushforward unrolls over training (see the [module docs](self)): entry `i`
 /// allows `unrolls[i]` unroll steps from training step `steps[i]` on (steps counted from 0,
@@ -252,15 +253,13 @@ pub fn push_forward<B: GnsKernels>(
         });
     }
     let frozen = model.with_params(model.params().map(|_, t| t.detach()))?;
-    let follows_model = free_particles(&mask.detach())?;
     let truth = truth.detach();
-    let mut pushed = batch.with_positions(batch.positions().detach())?;
+    let pushed = batch.with_positions(batch.positions().detach())?;
+    let mut rollout = Rollout::with_mask(&frozen, pushed, &mask.detach())?;
     for i in 0..shape[1] {
-        let next = frozen.next_positions(&pushed)?.detach();
-        let next = Tensor::select(&follows_model, &next, &truth_frame(&truth, i)?)?;
-        pushed = pushed.advance(&next, model.spec())?;
+        rollout.step(&truth_frame(&truth, i)?)?;
     }
-    Ok(pushed)
+    Ok(rollout.window()?.clone())
 }
 
 /// The pushforward loss (see the [module docs](self)): `k = truth.shape()[1] − 2` detached

@@ -5,7 +5,7 @@
 use phi_core::Tensor;
 use phi_gns::data::{LIQUID, OBSTACLE, Trajectory};
 use phi_gns::model::{Gns, GnsKernels, GraphBatch, ModelError, Parameters};
-use phi_gns::rollout::{RolloutRange, rollout, rollout_positions};
+use phi_gns::rollout::{Rollout, RolloutRange, TrajectoryRollout, rollout, rollout_positions};
 
 use crate::common::{self, Rng, bits, perturbed};
 
@@ -13,6 +13,8 @@ phi_core::backend_tests!(
     kinematic_particles_follow_the_truth_and_predictions_feed_back,
     a_nan_prediction_stops_the_rollout_at_step_one,
     an_overflow_stops_the_rollout_at_the_step_it_happens,
+    the_device_stepper_equals_a_window_rebuilt_on_the_host_every_step,
+    the_stepper_reads_each_frame_once_and_slides_it_in,
 );
 
 /// `C` of the models here (the thesis' 5).
@@ -278,4 +280,107 @@ fn an_overflow_stops_the_rollout_at_the_step_it_happens<B: GnsKernels>() {
         );
         assert_eq!(&frame[..4], &[0.5, 0.5, 0.52, 0.5]);
     }
+}
+
+/// The rollout as it was written before the device stepper: the window rebuilt on the host
+/// from the kept frames every step, uploaded, the kinematic rows overwritten on the host.
+fn host_window_rollout<B: GnsKernels>(
+    model: &Gns<B>,
+    trajectory: &Trajectory,
+    range: RolloutRange,
+) -> Vec<Vec<f32>> {
+    let device = B::default_device();
+    let n = trajectory.particles;
+    let mut history: Vec<Vec<f32>> = (range.start - C..=range.start)
+        .map(|t| trajectory.frame(t).to_vec())
+        .collect();
+    let mut frames = Vec::new();
+    for step in 1..=range.steps {
+        let refs: Vec<&[f32]> = history.iter().map(Vec::as_slice).collect();
+        let batch = GraphBatch::from_host(
+            &window(&refs, n),
+            &trajectory.particle_type,
+            model.spec(),
+            &device,
+        )
+        .unwrap();
+        let mut next = model.next_positions(&batch).unwrap().to_vec();
+        let truth = trajectory.frame(range.start + step);
+        for i in (0..n).filter(|&i| trajectory.particle_type[i] == OBSTACLE) {
+            next[2 * i..2 * i + 2].copy_from_slice(&truth[2 * i..2 * i + 2]);
+        }
+        frames.push(next.clone());
+        history.remove(0);
+        history.push(next);
+    }
+    frames
+}
+
+fn the_device_stepper_equals_a_window_rebuilt_on_the_host_every_step<B: GnsKernels>() {
+    let device = B::default_device();
+    let model = small_model::<B>();
+    let trajectory = trajectory(30);
+    let range = RolloutRange::full(C, trajectory.frames);
+    let expected = host_window_rollout(&model, &trajectory, range);
+    let frames: Vec<_> = TrajectoryRollout::new(&model, &trajectory, range, &device)
+        .unwrap()
+        .collect::<Result<_, _>>()
+        .unwrap();
+    assert_eq!(frames.len(), range.steps);
+    for (k, (frame, expected)) in frames.iter().zip(&expected).enumerate() {
+        assert_eq!((frame.step, frame.frame), (k + 1, C + k + 1));
+        assert_eq!(bits(&frame.positions), bits(expected), "step {}", k + 1);
+        assert_eq!(
+            bits(&frame.tensor.to_vec()),
+            bits(expected),
+            "step {}",
+            k + 1
+        );
+    }
+}
+
+fn the_stepper_reads_each_frame_once_and_slides_it_in<B: GnsKernels>() {
+    let device = B::default_device();
+    let model = small_model::<B>();
+    let trajectory = trajectory(12);
+    let n = trajectory.particles;
+    let start = GraphBatch::from_host(
+        &phi_gns::rollout::input_window(&trajectory, C, C),
+        &trajectory.particle_type,
+        model.spec(),
+        &device,
+    )
+    .unwrap();
+    let mut read = Rollout::new(&model, start.clone()).unwrap();
+    let mut unread = Rollout::new(&model, start).unwrap();
+    assert!(
+        read.read().is_empty(),
+        "nothing to read before the first step"
+    );
+    for step in 1..=4 {
+        let truth = Tensor::from_slice(trajectory.frame(C + step), &[n, 2], &device).unwrap();
+        let a = read.step(&truth).unwrap().to_vec();
+        let b = unread.step(&truth).unwrap().to_vec();
+        // Whether the caller reads a frame does not change the next step.
+        assert_eq!(bits(&a), bits(&b), "step {step}");
+        assert_eq!(bits(read.read()), bits(&a));
+        // The window the next step reads ends with this step's positions.
+        let window = read.window().unwrap().positions().to_vec();
+        for i in 0..n {
+            let latest = &window[(i * (C + 1) + C) * 2..(i * (C + 1) + C) * 2 + 2];
+            assert_eq!(
+                bits(latest),
+                bits(&a[2 * i..2 * i + 2]),
+                "step {step}: particle {i}"
+            );
+        }
+    }
+    let wrong = Tensor::<B>::zeros(&[n + 1, 2], &device);
+    assert!(matches!(
+        read.step(&wrong),
+        Err(ModelError::Input {
+            what: "kinematic positions",
+            ..
+        })
+    ));
 }
