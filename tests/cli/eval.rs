@@ -157,6 +157,9 @@ fn eval_writes_tables_plots_gif_and_resumes_from_its_cache() {
     // writes the same table.
     let cache = out.join("cache/b/test_1.json");
     let before = std::fs::read(&cache).unwrap();
+    // The first run drew the GIF from the frames its evaluations kept; a run from the cache
+    // rolls the models out again for it, and must draw the same pictures.
+    let gif = std::fs::read(out.join("rollouts.gif")).unwrap();
     let stderr = failed(eval(&models, &data, &out, &options));
     assert!(
         stderr.contains("previous `phi eval` output") && stderr.contains("--force"),
@@ -170,6 +173,10 @@ fn eval_writes_tables_plots_gif_and_resumes_from_its_cache() {
     );
     assert!(again.contains("| first |"), "{again}");
     assert_eq!(std::fs::read(&cache).unwrap(), before);
+    assert!(
+        std::fs::read(out.join("rollouts.gif")).unwrap() == gif,
+        "the GIF of kept frames differs from the GIF of a second rollout"
+    );
 
     // An entry from before the stored-unit one-step errors were recorded is completed with
     // them, its other results kept: the same entry and the same table.

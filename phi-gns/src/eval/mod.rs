@@ -35,7 +35,7 @@ pub use probe::{ProbeResult, ProbeScene, probe, probe_scene};
 pub use summary::{Band, ModelSummary, PlausibilitySummary};
 pub use trajectory::{
     Curves, EmdCost, EvalOptions, LATE_FRAMES, OneStepErrors, Plausibility, TrajectoryEvaluation,
-    evaluate_trajectory, mse_acc1, mse_acc1_in, one_step_errors,
+    evaluate_trajectory, evaluate_trajectory_with, mse_acc1, mse_acc1_in, one_step_errors,
 };
 
 use phi_core::point_sets::PointSetError;

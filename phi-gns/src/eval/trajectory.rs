@@ -205,6 +205,22 @@ pub fn evaluate_trajectory<B: GnsKernels>(
     options: &EvalOptions,
     device: &B::Device,
 ) -> Result<TrajectoryEvaluation, EvalError> {
+    evaluate_trajectory_with(model, trajectory, options, device, |_, _| {})
+}
+
+/// [`evaluate_trajectory`], handing each frame of the full rollout to `on_frame(frame,
+/// positions)` (`frame` the trajectory frame, `positions` `[N, dim]`) as it is predicted, so
+/// that a caller that also draws the rollout does not run it twice.
+///
+/// # Errors
+/// As [`evaluate_trajectory`].
+pub fn evaluate_trajectory_with<B: GnsKernels>(
+    model: &Gns<B>,
+    trajectory: &Trajectory,
+    options: &EvalOptions,
+    device: &B::Device,
+    on_frame: impl FnMut(usize, &[f32]),
+) -> Result<TrajectoryEvaluation, EvalError> {
     let spec = model.spec();
     let c = spec.config.input_velocities;
     let frames = trajectory.frames;
@@ -228,7 +244,7 @@ pub fn evaluate_trajectory<B: GnsKernels>(
     }
 
     let one_step = one_step_errors(model, trajectory, 1, device)?;
-    let full = full_rollout(model, trajectory, &liquid, options, device)?;
+    let full = full_rollout(model, trajectory, &liquid, options, device, on_frame)?;
     let steps = frames - 1 - c;
     let failed = full.failed_step;
 
@@ -489,6 +505,7 @@ fn full_rollout<B: GnsKernels>(
     liquid: &[bool],
     options: &EvalOptions,
     device: &B::Device,
+    mut on_frame: impl FnMut(usize, &[f32]),
 ) -> Result<FullRollout, EvalError> {
     let c = model.spec().config.input_velocities;
     let dim = trajectory.dim;
@@ -507,6 +524,7 @@ fn full_rollout<B: GnsKernels>(
     let mut final_centres = None;
     let ran = rollout(model, trajectory, range, device, |step, positions| {
         let frame = c + step;
+        on_frame(frame, positions);
         let truth = trajectory.frame(frame);
         let outcome = (|| -> Result<(), EvalError> {
             let predicted_liquid = liquid_positions(positions, liquid, dim);

@@ -37,7 +37,7 @@ use phi_gns::data::{Dataset, METADATA_FILE, Metadata};
 use phi_gns::eval::metrics::Container;
 use phi_gns::eval::{
     Band, EmdCost, EvalOptions, ModelSummary, TrajectoryEvaluation, evaluate_trajectory,
-    one_step_errors,
+    evaluate_trajectory_with, one_step_errors,
 };
 use phi_gns::model::{
     Floor, Gns, GnsKernels, MODEL_FILE, ModelError, ModelSpec, WEIGHTS_FILE, load_model, read_spec,
@@ -654,7 +654,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
             .collect(),
     };
     write_json(&args.out.join(RECORD_FILE), &record)?;
-    let evaluations = crate::with_backend!(kind, B => evaluate_all::<B>(&plan, &args))?;
+    let (evaluations, kept) = crate::with_backend!(kind, B => evaluate_all::<B>(&plan, &args))?;
     for (model, evals) in record.models.iter_mut().zip(&evaluations) {
         // MSE-acc 1 in one normalisation for every model: the (first) dataset's.
         model.summary = Some(ModelSummary::of(
@@ -665,7 +665,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
         model.emd_band = Some(Band::of(evals, |e| &e.curves.emd));
     }
     if args.frame_every > 0 && plan.datasets[0].metadata().dim == 2 {
-        record.gif = Some(crate::with_backend!(kind, B => write_gif::<B>(&plan, &args))?);
+        record.gif = Some(crate::with_backend!(kind, B => write_gif::<B>(&plan, &args, kept))?);
     }
     let mut figures = Vec::new();
     let any_band = record
@@ -710,7 +710,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
 fn evaluate_all<B: GnsKernels>(
     plan: &Plan,
     args: &EvalArgs,
-) -> Result<Vec<Vec<TrajectoryEvaluation>>> {
+) -> Result<(Vec<Vec<TrajectoryEvaluation>>, Vec<Option<KeptRollout>>)> {
     let mut results: Vec<Vec<Option<TrajectoryEvaluation>>> =
         vec![vec![None; plan.indices.len()]; plan.models.len()];
     let mut todo = Vec::new();
@@ -747,57 +747,31 @@ fn evaluate_all<B: GnsKernels>(
         std::io::IsTerminal::is_terminal(&std::io::stderr()),
     );
     let done = Mutex::new(Vec::with_capacity(todo.len()));
-    todo.par_iter()
-        .map(|(m, k, index, path, earlier)| -> Result<()> {
-            let model = &plan.models[*m];
+    // The jobs of each model in one lane per thread, each lane reading the weights once (a
+    // model on the device is not shared between threads).
+    let threads = rayon::current_num_threads().max(1);
+    let mut lanes: Vec<(usize, Vec<&EvalJob>)> = Vec::new();
+    for (m, _) in plan.models.iter().enumerate() {
+        let jobs: Vec<&EvalJob> = todo.iter().filter(|job| job.0 == m).collect();
+        for lane in 0..threads.min(jobs.len()) {
+            let share = jobs.iter().skip(lane).step_by(threads).copied().collect();
+            lanes.push((m, share));
+        }
+    }
+    // The GIF's trajectory keeps its frames as it is evaluated, so that the GIF does not roll
+    // the model out a second time.
+    let gif = args.frame_every > 0 && plan.datasets[0].metadata().dim == 2;
+    let kept: Vec<Mutex<Option<KeptRollout>>> =
+        plan.models.iter().map(|_| Mutex::new(None)).collect();
+    lanes
+        .par_iter()
+        .map(|(m, jobs)| -> Result<()> {
             let device = B::default_device();
-            let gns = model.load::<B>(&device)?;
-            let dataset = &plan.datasets[model.data];
-            let (trajectory, _) = dataset.read_with_stats(&args.split, *index)?;
-            let context = || {
-                format!(
-                    "evaluating {} on trajectory {index} of '{}'",
-                    model.label, args.split
-                )
-            };
-            let entry = match earlier {
-                Some(earlier) => {
-                    let mut entry = earlier.clone();
-                    let errors =
-                        one_step_errors(&gns, &trajectory, 1, &device).with_context(context)?;
-                    // The same weights and data give the same value up to the order of sums.
-                    let before = entry.evaluation.mse_acc1;
-                    if (errors.mse_acc1 - before).abs() > 1e-4 * before.abs().max(1e-30) {
-                        bail!(
-                            "{}: its MSE-acc 1 ({}) is not what the model computes now ({}): \
-                             delete the entry to recompute it",
-                            path.display(),
-                            entry.evaluation.mse_acc1,
-                            errors.mse_acc1
-                        );
-                    }
-                    entry.evaluation.acc_error = errors.acc_error;
-                    entry
-                }
-                None => CacheEntry {
-                    format: CACHE_FORMAT.to_string(),
-                    model: model.dir.display().to_string(),
-                    digest: model.digest.clone(),
-                    split: args.split.clone(),
-                    options: plan.options.clone(),
-                    evaluation: evaluate_trajectory(&gns, &trajectory, &plan.options, &device)
-                        .with_context(context)?,
-                },
-            };
-            if let Some(parent) = path.parent() {
-                std::fs::create_dir_all(parent)
-                    .with_context(|| format!("creating {}", parent.display()))?;
+            let gns = plan.models[*m].load::<B>(&device)?;
+            for job in jobs {
+                evaluate_job(plan, args, &gns, job, &device, gif, &kept[*m], &done)?;
+                bar.inc(1);
             }
-            write_json(path, &entry)?;
-            bar.inc(1);
-            done.lock()
-                .expect("no thread panics while holding the lock")
-                .push((*m, *k, entry.evaluation));
             Ok(())
         })
         .collect::<Result<Vec<()>>>()?;
@@ -805,17 +779,115 @@ fn evaluate_all<B: GnsKernels>(
     for (m, k, evaluation) in done.into_inner().expect("no thread panicked") {
         results[m][k] = Some(evaluation);
     }
-    Ok(results
+    let evaluations = results
         .into_iter()
         .map(|evals| evals.into_iter().flatten().collect())
-        .collect())
+        .collect();
+    let kept = kept
+        .into_iter()
+        .map(|k| k.into_inner().expect("no thread panicked"))
+        .collect();
+    Ok((evaluations, kept))
 }
 
-/// Rolls every model out on trajectory `--gif-trajectory` and writes `rollouts.gif`: the truth,
-/// then each model, side by side, every `--frame-every` frames from the start frame `C`. A model
-/// whose rollout blew up keeps its last finite frame, captioned "(blown up)"; one that reads
-/// more history frames than another shows the truth until its own start, captioned "(history)".
-fn write_gif<B: GnsKernels>(plan: &Plan, args: &EvalArgs) -> Result<GifRecord> {
+/// One (model, trajectory) evaluation to do: the model, its position among the trajectories,
+/// the trajectory, the cache file, and a cached entry that lacks only the stored-unit one-step
+/// errors.
+type EvalJob = (usize, usize, usize, PathBuf, Option<CacheEntry>);
+
+/// Evaluates one job with the loaded model `gns`, writes its cache entry and pushes the result
+/// to `done`; on the GIF's trajectory (`gif`), keeps the rollout's frames in `kept`.
+#[allow(clippy::too_many_arguments)]
+fn evaluate_job<B: GnsKernels>(
+    plan: &Plan,
+    args: &EvalArgs,
+    gns: &Gns<B>,
+    (m, k, index, path, earlier): &EvalJob,
+    device: &B::Device,
+    gif: bool,
+    kept: &Mutex<Option<KeptRollout>>,
+    done: &Mutex<Vec<(usize, usize, TrajectoryEvaluation)>>,
+) -> Result<()> {
+    let model = &plan.models[*m];
+    let dataset = &plan.datasets[model.data];
+    let (trajectory, _) = dataset.read_with_stats(&args.split, *index)?;
+    let context = || {
+        format!(
+            "evaluating {} on trajectory {index} of '{}'",
+            model.label, args.split
+        )
+    };
+    let entry = match earlier {
+        Some(earlier) => {
+            let mut entry = earlier.clone();
+            let errors = one_step_errors(gns, &trajectory, 1, device).with_context(context)?;
+            // The same weights and data give the same value up to the order of sums.
+            let before = entry.evaluation.mse_acc1;
+            if (errors.mse_acc1 - before).abs() > 1e-4 * before.abs().max(1e-30) {
+                bail!(
+                    "{}: its MSE-acc 1 ({}) is not what the model computes now ({}): \
+                             delete the entry to recompute it",
+                    path.display(),
+                    entry.evaluation.mse_acc1,
+                    errors.mse_acc1
+                );
+            }
+            entry.evaluation.acc_error = errors.acc_error;
+            entry
+        }
+        None => CacheEntry {
+            format: CACHE_FORMAT.to_string(),
+            model: model.dir.display().to_string(),
+            digest: model.digest.clone(),
+            split: args.split.clone(),
+            options: plan.options.clone(),
+            evaluation: if gif && *index == args.gif_trajectory {
+                let c = gns.spec().config.input_velocities;
+                let mut frames = vec![trajectory.frame(c).to_vec()];
+                let evaluation = evaluate_trajectory_with(
+                    gns,
+                    &trajectory,
+                    &plan.options,
+                    device,
+                    |_, positions| frames.push(positions.to_vec()),
+                )
+                .with_context(context)?;
+                *kept
+                    .lock()
+                    .expect("no thread panics while holding the lock") = Some((c, frames));
+                evaluation
+            } else {
+                evaluate_trajectory(gns, &trajectory, &plan.options, device)
+                    .with_context(context)?
+            },
+        },
+    };
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("creating {}", parent.display()))?;
+    }
+    write_json(path, &entry)?;
+    done.lock()
+        .expect("no thread panics while holding the lock")
+        .push((*m, *k, entry.evaluation));
+    Ok(())
+}
+
+/// A model's rollout on the GIF's trajectory: its start frame `C` and the frames from there
+/// (the truth at `C`, then each prediction, up to the last finite one).
+type KeptRollout = (usize, Vec<Vec<f32>>);
+
+/// Writes `rollouts.gif` of trajectory `--gif-trajectory`: the truth, then each model, side by
+/// side, every `--frame-every` frames from the start frame `C`. A model's frames are those kept
+/// while it was evaluated (`kept`); one whose evaluation came from the cache is rolled out here.
+/// A model whose rollout blew up keeps its last finite frame, captioned "(blown up)"; one that
+/// reads more history frames than another shows the truth until its own start, captioned
+/// "(history)".
+fn write_gif<B: GnsKernels>(
+    plan: &Plan,
+    args: &EvalArgs,
+    kept: Vec<Option<KeptRollout>>,
+) -> Result<GifRecord> {
     // The trajectory of every dataset: a `--model-data` model rolls out on its own and is drawn
     // with its own particles (the walls of the walls variant).
     let trajectories: Vec<_> = plan
@@ -825,10 +897,14 @@ fn write_gif<B: GnsKernels>(plan: &Plan, args: &EvalArgs) -> Result<GifRecord> {
         .collect::<Result<_>>()?;
     let trajectory = &trajectories[0];
     let device = B::default_device();
-    let rollouts: Vec<(usize, Vec<Vec<f32>>)> =
+    let rollouts: Vec<KeptRollout> =
         plan.models
             .par_iter()
-            .map(|model| -> Result<(usize, Vec<Vec<f32>>)> {
+            .zip(kept)
+            .map(|(model, kept)| -> Result<KeptRollout> {
+                if let Some(kept) = kept {
+                    return Ok(kept);
+                }
                 let own = &trajectories[model.data];
                 let gns = model.load::<B>(&device)?;
                 let c = model.spec.config.input_velocities;
