@@ -19,6 +19,7 @@ use anyhow::{Context, Result, ensure};
 use clap::Parser;
 use phi::backends::BackendKind;
 use phi_gns::data::{Dataset, read_trajectory};
+use phi_gns::graph::{ExamplePositions, RadiusGraph};
 use phi_gns::model::{Gns, GnsConfig, GnsKernels, GraphBatch, ModelSpec, save_model};
 use phi_gns::rollout::{RolloutRange, input_window, rollout};
 use phi_io::npz::{NpyArray, write_npz};
@@ -168,15 +169,29 @@ fn run<B: GnsKernels>(args: &Args) -> Result<()> {
             steps: args.rollout,
         };
         let start = Instant::now();
-        let mut frames = 0;
-        rollout(&model, &trajectory, range, &device, |_, _| {
-            frames += 1;
+        let mut latest = vec![trajectory.frame(args.frame).to_vec()];
+        rollout(&model, &trajectory, range, &device, |_, positions| {
+            latest.push(positions.to_vec());
             Ok(())
         })?;
         let seconds = start.elapsed().as_secs_f64();
+        let frames = latest.len() - 1;
+        // Step k reads the graph of frame k − 1: the rollout's graphs grow or shrink as the
+        // predicted liquid gathers or spreads, so the time is per edge as well as per step.
+        let edges = latest[..frames]
+            .iter()
+            .map(|p| {
+                let example = ExamplePositions::new(p, trajectory.particles);
+                RadiusGraph::for_batch(&[example], dim, model.spec().config.connectivity_radius)
+                    .map(|g| g.edges())
+            })
+            .sum::<Result<usize, _>>()? as f64
+            / frames as f64;
         println!(
-            "rollout: {frames} steps in {seconds:.2} s ({:.1} ms per step), peak RSS {:.0} MiB",
+            "rollout: {frames} steps in {seconds:.2} s ({:.1} ms per step; {edges:.0} edges a \
+             step, {:.2} µs per edge), peak RSS {:.0} MiB",
             seconds * 1e3 / frames as f64,
+            seconds * 1e6 / frames as f64 / edges,
             peak_rss_mib().unwrap_or(f64::NAN)
         );
     }
