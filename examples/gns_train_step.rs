@@ -126,11 +126,7 @@ fn noisy_batch<B: GnsKernels>(
     let mut next = Vec::new();
     let mut noises = Vec::with_capacity(examples.len());
     for example in examples {
-        let kinematic: Vec<bool> = example
-            .types
-            .iter()
-            .map(|t| spec.kinematic_types.contains(t))
-            .collect();
+        let kinematic = spec.kinematic(&example.types);
         let noise = random_walk_noise(&kinematic, window, dim, noise_std, rng);
         noisy.push(noise.apply(&example.window));
         next.extend(noise.adjust_target(&example.next));

@@ -65,10 +65,10 @@ impl<'m, B: GnsKernels> Rollout<'m, B> {
                 ),
             });
         }
-        let follows: Vec<f32> = window
-            .types()
-            .iter()
-            .map(|t| f32::from(u8::from(!spec.kinematic_types.contains(t))))
+        let follows: Vec<f32> = spec
+            .kinematic(window.types())
+            .into_iter()
+            .map(|k| f32::from(u8::from(!k)))
             .collect();
         let device = window.positions().device();
         let follows_model = Tensor::from_vec(follows, &[shape[0], 1], &device)?;

@@ -401,11 +401,7 @@ fn roll_one<B: GnsKernels>(
     let spec = model.spec();
     let (n, dim) = (trajectory.particles, trajectory.dim);
     let range = plan.range;
-    let kinematic: Vec<bool> = trajectory
-        .particle_type
-        .iter()
-        .map(|t| spec.kinematic_types.contains(t))
-        .collect();
+    let kinematic = spec.kinematic(&trajectory.particle_type);
     let c = spec.config.input_velocities;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut record = RolloutRecord {

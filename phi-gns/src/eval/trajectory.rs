@@ -224,10 +224,10 @@ pub fn evaluate_trajectory_with<B: GnsKernels>(
     let spec = model.spec();
     let c = spec.config.input_velocities;
     let frames = trajectory.frames;
-    let liquid: Vec<bool> = trajectory
-        .particle_type
-        .iter()
-        .map(|t| !spec.kinematic_types.contains(t))
+    let liquid: Vec<bool> = spec
+        .kinematic(&trajectory.particle_type)
+        .into_iter()
+        .map(|k| !k)
         .collect();
     let liquid_particles = liquid.iter().filter(|l| **l).count();
     if liquid_particles == 0 {

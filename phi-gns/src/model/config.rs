@@ -209,6 +209,15 @@ pub struct ModelSpec {
 }
 
 impl ModelSpec {
+    /// Which of the particles of types `types` are kinematic (their positions come from the
+    /// ground truth, and no loss or metric counts them).
+    pub fn kinematic(&self, types: &[i64]) -> Vec<bool> {
+        types
+            .iter()
+            .map(|t| self.kinematic_types.contains(t))
+            .collect()
+    }
+
     /// A model for a dataset: its dimension, bounds, statistics and particle types, with the
     /// sizes of `config` (whose `dim` and `particle_types` are taken from the dataset).
     pub fn for_dataset(metadata: &Metadata, mut config: GnsConfig, seed: u64) -> Self {

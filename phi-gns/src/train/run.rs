@@ -460,11 +460,7 @@ impl<B: GnsKernels> LossInputs<B> {
                 .collect();
             let mut window = vec![0.0f32; count * (c + 1) * dim];
             crate::rollout::fill_window(&frames, count, dim, &mut window);
-            let kinematic: Vec<bool> = example
-                .particle_type
-                .iter()
-                .map(|t| kinematic_types.contains(t))
-                .collect();
+            let kinematic = model.spec().kinematic(&example.particle_type);
             let mut target = example
                 .positions_at(start + 1)
                 .expect("the sampler's window spans it")

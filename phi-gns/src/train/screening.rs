@@ -69,11 +69,7 @@ pub fn screen<B: GnsKernels>(
         windows += count;
         let steps = rollout_steps.min(frames - 1 - c);
         used_steps = used_steps.min(steps);
-        let kinematic: Vec<bool> = trajectory
-            .particle_type
-            .iter()
-            .map(|t| model.spec().kinematic_types.contains(t))
-            .collect();
+        let kinematic = model.spec().kinematic(&trajectory.particle_type);
         let mut sum = 0.0;
         let ran = rollout(
             model,
