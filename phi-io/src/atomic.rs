@@ -70,6 +70,19 @@ pub fn write_atomic<E: From<IoError>>(
     }
 }
 
+/// Writes `value` as pretty-printed JSON with a final newline, atomically ([`write_atomic`]).
+///
+/// # Errors
+/// [`IoError::InvalidInput`] naming `path` when `value` cannot be encoded (a map with
+/// non-string keys); [`IoError::Io`] when the file cannot be written.
+pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), IoError> {
+    let mut text = serde_json::to_vec_pretty(value).map_err(|e| {
+        IoError::InvalidInput(format!("'{}': cannot encode as JSON: {e}", path.display()))
+    })?;
+    text.push(b'\n');
+    write_atomic(path, |w| write_all(w, &text, path))
+}
+
 /// Best effort: syncs the directory holding `path` so that a rename survives a power loss.
 /// Errors are ignored (not every platform lets directories be opened or synced).
 fn sync_parent_dir(path: &Path) {
@@ -227,6 +240,26 @@ mod tests {
             .map(|e| e.unwrap().file_name())
             .collect();
         assert_eq!(names, vec![std::ffi::OsString::from("out.bin")]);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn json_reads_back_and_an_unencodable_value_names_the_file() {
+        let dir = crate::test_util::temp_dir("atomic-json");
+        let path = dir.join("record.json");
+        let value = std::collections::BTreeMap::from([("steps", 3.5f64), ("loss", -1e-9)]);
+        write_json(&path, &value).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(text.ends_with("}\n"), "{text}");
+        let back: std::collections::BTreeMap<String, f64> = serde_json::from_str(&text).unwrap();
+        assert_eq!(back["steps"], 3.5);
+        assert_eq!(back["loss"], -1e-9);
+        // JSON object keys must be strings: a map keyed by tuples cannot be written, and the
+        // file keeps what it held.
+        let bad = std::collections::BTreeMap::from([((1, 2), 0.0)]);
+        let err = write_json(&path, &bad).unwrap_err().to_string();
+        assert!(err.contains("record.json") && err.contains("JSON"), "{err}");
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), text);
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -22,6 +22,7 @@ mod toml_file;
 
 pub use atomic::{
     publish_dir, remove_stale_temp_files, staging_dir, temp_file_pid, write_all, write_atomic,
+    write_json,
 };
 pub use error::IoError;
 pub use toml_file::{TomlError, parse_toml, read_toml_text};

@@ -19,7 +19,6 @@
 use std::path::Path;
 
 use phi_io::npz::NpyArray;
-use phi_io::{IoError, write_atomic};
 use serde::Serialize;
 
 use super::dataset::write_split_npz;
@@ -106,15 +105,7 @@ fn positions(traj: &Trajectory) -> NpyArray {
 
 /// Writes `json` to `path`, pretty-printed, atomically.
 fn write_json(path: &Path, json: &impl Serialize) -> Result<(), DataError> {
-    let mut text = serde_json::to_vec_pretty(json).map_err(|source| DataError::Json {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    text.push(b'\n');
-    write_atomic(path, |w| {
-        std::io::Write::write_all(w, &text).map_err(|e| IoError::io(path, "cannot write", e))
-    })?;
-    Ok(())
+    Ok(phi_io::write_json(path, json)?)
 }
 
 /// Writes `split` of `dataset` as gns's `{split}.npz` to `out_file`: for each trajectory `i`

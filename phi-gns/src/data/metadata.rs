@@ -1,10 +1,8 @@
 //! `metadata.json`: DeepMind's keys plus ours.
 
 use std::collections::BTreeMap;
-use std::io::Write;
 use std::path::Path;
 
-use phi_io::{IoError, write_atomic};
 use serde::{Deserialize, Serialize};
 
 use super::{DataError, LIQUID, OBSTACLE, TrajectoryStats};
@@ -255,14 +253,5 @@ pub fn read_metadata(dir: &Path) -> Result<Metadata, DataError> {
 pub fn write_metadata(dir: &Path, metadata: &Metadata) -> Result<(), DataError> {
     let path = dir.join(METADATA_FILE);
     metadata.validate(&path)?;
-    let mut text = serde_json::to_vec_pretty(metadata).map_err(|source| DataError::Json {
-        path: path.clone(),
-        source,
-    })?;
-    text.push(b'\n');
-    write_atomic(&path, |w| {
-        w.write_all(&text)
-            .map_err(|e| IoError::io(&path, "cannot write", e))
-    })?;
-    Ok(())
+    Ok(phi_io::write_json(&path, metadata)?)
 }

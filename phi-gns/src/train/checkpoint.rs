@@ -356,9 +356,7 @@ fn write_directory(
 }
 
 fn write_json(path: &Path, value: &impl Serialize) -> Result<(), TrainError> {
-    let bytes = serde_json::to_vec_pretty(value).map_err(|e| error(path, e))?;
-    phi_io::write_atomic(path, |w| phi_io::write_all(w, &bytes, path))?;
-    Ok(())
+    Ok(phi_io::write_json(path, value)?)
 }
 
 fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, TrainError> {

@@ -1064,9 +1064,7 @@ fn read_cache(
 
 /// Writes `value` as pretty JSON, atomically.
 fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
-    let mut text = serde_json::to_vec_pretty(value)?;
-    text.push(b'\n');
-    write_bytes(path, &text)
+    Ok(phi_io::write_json(path, value)?)
 }
 
 /// Writes `text`, atomically.
