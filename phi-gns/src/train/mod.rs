@@ -12,7 +12,9 @@
 //! - [`average`]: a moving average of the weights over the steps, screened and kept instead
 //!   of the weights of one step.
 //!
-//! [`train_step`] and [`train_step_with`] take one Adam step on a loss. A whole run, with its
+//! [`step`] is one training step read top to bottom ([`take_step`]: windows, mirroring, noise,
+//! targets, graph, the variant's loss, gradients, Adam); [`train_step`] and
+//! [`train_step_with`] take one Adam step on a loss of the caller's. A whole run, with its
 //! presets ([`config`]), checkpoints ([`checkpoint`]), screening on the validation split
 //! ([`screening`]) and files, is [`run::TrainingRun`]; `phi train` drives it.
 
@@ -30,6 +32,7 @@ pub mod rng;
 pub mod run;
 pub mod sampler;
 pub mod screening;
+pub mod step;
 pub mod stream;
 
 pub use adam::{Adam, AdamConfig, LearningRate};
@@ -42,66 +45,5 @@ pub use noise::{RandomWalkNoise, random_walk_noise};
 pub use pushforward::{Pushforward, push_forward, pushforward_loss};
 pub use rng::{RngStream, step_rng};
 pub use sampler::{WindowRef, WindowSampler, WindowSpec};
+pub use step::{StepInputs, take_step, train_step, train_step_with};
 pub use stream::{BatchConfig, BatchSource, BatchStream, HostBatch, HostExample};
-
-use phi_core::AutodiffBackend;
-use phi_core::tensor::Tensor;
-
-use crate::model::{Gns, GnsKernels, GraphBatch, ModelError};
-
-/// One optimisation step on the one-step loss: the loss of `model` on `batch` against `next`
-/// (`[N, dim]`, counted where `mask` is 1), its gradients in every parameter, and Adam's update.
-/// Returns the updated model and the loss before the update.
-///
-/// # Errors
-/// As [`one_step_loss`] and [`train_step_with`].
-pub fn train_step<B: AutodiffBackend + GnsKernels>(
-    model: &Gns<B>,
-    adam: &mut Adam<B>,
-    batch: &GraphBatch<B>,
-    next: &Tensor<B>,
-    mask: &Tensor<B>,
-) -> Result<(Gns<B>, f32), ModelError> {
-    train_step_with(model, adam, |tracked| {
-        one_step_loss(tracked, batch, next, mask, ErrorNorm::Squared)
-    })
-}
-
-/// One optimisation step on any loss: `loss` is called with `model` whose parameters are
-/// trainable leaves and returns a one-element tensor ([`one_step_loss`], [`multi_step_loss`],
-/// [`pushforward_loss`], ...); its gradients in every parameter go to Adam's update. Returns the
-/// updated model and the loss before the update.
-///
-/// # Errors
-/// Whatever `loss` returns; [`ModelError::Input`] for a loss that is not one value,
-/// [`ModelError::NonFinite`] for a NaN or infinite loss or gradient (nothing is updated).
-pub fn train_step_with<B, F>(
-    model: &Gns<B>,
-    adam: &mut Adam<B>,
-    loss: F,
-) -> Result<(Gns<B>, f32), ModelError>
-where
-    B: AutodiffBackend + GnsKernels,
-    F: FnOnce(&Gns<B>) -> Result<Tensor<B>, ModelError>,
-{
-    let leaves = model.params().map(|_, t| t.require_grad());
-    let tracked = model.with_params(leaves.clone())?;
-    let loss = loss(&tracked)?;
-    if loss.numel() != 1 {
-        return Err(ModelError::Input {
-            what: "loss",
-            reason: format!("shape {:?}; a loss is one value", loss.shape()),
-        });
-    }
-    let value = loss.to_scalar()?;
-    if !value.is_finite() {
-        return Err(ModelError::NonFinite {
-            what: "loss",
-            reason: format!("the loss is {value}"),
-        });
-    }
-    let wrt: Vec<&Tensor<B>> = leaves.iter().map(|(_, t)| t).collect();
-    let gradients = loss.gradients(&wrt)?;
-    let updated = adam.update(model.params(), &gradients)?;
-    Ok((model.with_params(updated)?, value))
-}

@@ -28,7 +28,6 @@ use std::time::Instant;
 
 use phi_core::AutodiffBackend;
 use phi_core::backend::Host;
-use phi_core::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
 use super::checkpoint::{
@@ -36,16 +35,13 @@ use super::checkpoint::{
     prune_checkpoints, save_best, save_checkpoint,
 };
 use super::config::{SelectBy, TrainConfig};
-use super::rng::{RngStream, step_rng};
 use super::sampler::WindowSpec;
 use super::screening::{Screening, screen};
-use super::stream::{BatchConfig, BatchSource, BatchStream, HostBatch};
-use super::{
-    Adam, ErrorNorm, TrainError, WeightAverage, multi_step_loss, non_kinematic_mask,
-    pushforward_loss, random_walk_noise, train_step_with,
-};
+use super::step::take_step;
+use super::stream::{BatchConfig, BatchSource, BatchStream};
+use super::{Adam, TrainError, WeightAverage};
 use crate::data::{Dataset, METADATA_FILE, Trajectory};
-use crate::model::{Gns, GnsKernels, GraphBatch, ModelError, load_model};
+use crate::model::{Gns, GnsKernels, ModelError, load_model};
 
 /// The value of `made_by` in `train.json`.
 pub const MADE_BY: &str = "phi train";
@@ -268,16 +264,14 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
         let step = self.state.step;
         debug_assert_eq!(batch.step, step, "the stream runs in step with the run");
         let learning_rate = self.config.optimizer.learning_rate.at(step);
-        let unrolls = self.config.training.pushforward.as_ref().map_or(0, |p| {
-            p.draw(
-                step,
-                &mut step_rng(self.config.training.seed, step, RngStream::Pushforward),
-            )
-        });
-        let inputs =
-            LossInputs::assemble(&self.model, &self.config, &batch, unrolls, &self.device)?;
-        let result = train_step_with(&self.model, &mut self.adam, |model| inputs.loss(model));
-        let (model, loss) = match result {
+        let result = take_step(
+            &self.model,
+            &mut self.adam,
+            &self.config,
+            &batch,
+            &self.device,
+        );
+        let (model, loss, unrolls) = match result {
             Ok(done) => done,
             Err(ModelError::NonFinite { what, reason }) => {
                 let kept = self.checkpoint()?;
@@ -396,143 +390,6 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
             self.state.step
         );
         append_log(&self.out.join(LOG_FILE), &row)
-    }
-}
-
-/// The host-side inputs of one step's loss, on the device.
-struct LossInputs<B: GnsKernels> {
-    batch: GraphBatch<B>,
-    next: Tensor<B>,
-    /// `[N, m, dim]`: the true frames the multi-step or pushforward loss reads (none for the
-    /// plain one-step loss).
-    truth: Option<Tensor<B>>,
-    mask: Tensor<B>,
-    pushforward: bool,
-    norm: ErrorNorm,
-}
-
-/// Reflects positions (`dim` components each, row-major) across the plane `x = about / 2` of
-/// the first axis: `x ↦ about − x`, with `about` the sum of the axis's lower and upper bounds.
-fn mirror_first_axis(positions: &mut [f32], dim: usize, about: f32) {
-    for x in positions.iter_mut().step_by(dim) {
-        *x = about - *x;
-    }
-}
-
-impl<B: GnsKernels> LossInputs<B> {
-    /// The windows of `batch` with the step's noise, the targets and the mask. With `unrolls`
-    /// pushforward steps, the start window ends `unrolls` frames before the latest input frame
-    /// `t` of the drawn window, and the truth holds frames `t − unrolls ..= t + 1`; with `n`
-    /// extra steps, frames `t ..= t + n + 1`.
-    fn assemble(
-        model: &Gns<B>,
-        config: &TrainConfig,
-        batch: &HostBatch,
-        unrolls: usize,
-        device: &B::Device,
-    ) -> Result<Self, ModelError> {
-        let c = config.model.input_velocities;
-        let n = config.training.extra_steps;
-        let sigma = config.model.noise_std;
-        let kinematic_types = &model.spec().kinematic_types;
-        let mut noise_rng = step_rng(config.training.seed, batch.step, RngStream::Noise);
-        let mut mirror_rng = step_rng(config.training.seed, batch.step, RngStream::Mirror);
-        let axis = model.spec().bounds[0];
-        let mirror_about = (axis[0] + axis[1]) as f32;
-        let mut windows = Vec::with_capacity(batch.examples.len());
-        let (mut next, mut truth, mut types) = (Vec::new(), Vec::new(), Vec::new());
-        let truth_frames = if unrolls > 0 {
-            unrolls + 2
-        } else if n > 0 {
-            n + 2
-        } else {
-            0
-        };
-        for example in &batch.examples {
-            let (count, dim) = (example.particles, example.dim);
-            let start = example.frame - unrolls;
-            let frames: Vec<&[f32]> = (start - c..=start)
-                .map(|f| {
-                    example
-                        .positions_at(f)
-                        .expect("the sampler's window spans it")
-                })
-                .collect();
-            let mut window = vec![0.0f32; count * (c + 1) * dim];
-            crate::rollout::fill_window(&frames, count, dim, &mut window);
-            let kinematic = model.spec().kinematic(&example.particle_type);
-            let mut target = example
-                .positions_at(start + 1)
-                .expect("the sampler's window spans it")
-                .to_vec();
-            // A stream of its own: turning mirroring on leaves the windows and the noise as
-            // they were, and only reflects the examples whose draw is odd.
-            let mirrored =
-                config.training.mirror && rand::RngCore::next_u64(&mut mirror_rng) & 1 == 1;
-            if mirrored {
-                mirror_first_axis(&mut window, dim, mirror_about);
-                mirror_first_axis(&mut target, dim, mirror_about);
-            }
-            if sigma > 0.0 {
-                let noise = random_walk_noise(&kinematic, c + 1, dim, sigma, &mut noise_rng);
-                window = noise.apply(&window);
-                next.extend(noise.adjust_target(&target));
-            } else {
-                next.extend_from_slice(&target);
-            }
-            if truth_frames > 0 {
-                let first = if unrolls > 0 { start } else { example.frame };
-                let rows: Vec<&[f32]> = (first..first + truth_frames)
-                    .map(|f| {
-                        example
-                            .positions_at(f)
-                            .expect("the sampler's window spans it")
-                    })
-                    .collect();
-                let mut block = vec![0.0f32; count * truth_frames * dim];
-                crate::rollout::fill_window(&rows, count, dim, &mut block);
-                if mirrored {
-                    mirror_first_axis(&mut block, dim, mirror_about);
-                }
-                truth.extend(block);
-            }
-            windows.push(window);
-            types.extend_from_slice(&example.particle_type);
-        }
-        let examples: Vec<(&[f32], &[i64])> = windows
-            .iter()
-            .zip(&batch.examples)
-            .map(|(w, e)| (w.as_slice(), e.particle_type.as_slice()))
-            .collect();
-        let graph = GraphBatch::from_host_batch(&examples, model.spec(), device)?;
-        let (particles, dim) = (types.len(), model.spec().config.dim);
-        let next = Tensor::from_vec(next, &[particles, dim], device)?;
-        let truth = (truth_frames > 0)
-            .then(|| Tensor::from_vec(truth, &[particles, truth_frames, dim], device))
-            .transpose()?;
-        let mask = non_kinematic_mask::<B>(&types, kinematic_types, device)?;
-        Ok(LossInputs {
-            batch: graph,
-            next,
-            truth,
-            mask,
-            pushforward: unrolls > 0,
-            norm: config.training.error_norm(),
-        })
-    }
-
-    fn loss(&self, model: &Gns<B>) -> Result<Tensor<B>, ModelError> {
-        match (&self.truth, self.pushforward) {
-            (None, _) => {
-                super::one_step_loss(model, &self.batch, &self.next, &self.mask, self.norm)
-            }
-            (Some(truth), true) => {
-                pushforward_loss(model, &self.batch, &self.next, truth, &self.mask, self.norm)
-            }
-            (Some(truth), false) => {
-                multi_step_loss(model, &self.batch, &self.next, truth, &self.mask, self.norm)
-            }
-        }
     }
 }
 
@@ -735,26 +592,4 @@ fn truncate_log(path: &Path, step: u64) -> Result<(), TrainError> {
     }
     phi_io::write_atomic(path, |w| phi_io::write_all(w, kept.as_bytes(), path))?;
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::mirror_first_axis;
-
-    #[test]
-    fn mirroring_reflects_the_first_axis_only_and_undoes_itself() {
-        // Three 2D positions in [0.1, 0.9]²: about = 1.0.
-        let original = vec![0.1f32, 0.2, 0.5, 0.7, 0.85, 0.3];
-        let mut p = original.clone();
-        mirror_first_axis(&mut p, 2, 1.0);
-        assert_eq!(p, vec![0.9, 0.2, 0.5, 0.7, 1.0 - 0.85, 0.3]);
-        mirror_first_axis(&mut p, 2, 1.0);
-        for (a, b) in p.iter().zip(&original) {
-            assert!((a - b).abs() <= 1e-7, "{a} vs {b}");
-        }
-        // 3D: x only, y (gravity's axis in 2D) and z untouched.
-        let mut q = vec![0.2f32, 0.3, 0.4];
-        mirror_first_axis(&mut q, 3, 1.0);
-        assert_eq!(q, vec![0.8, 0.3, 0.4]);
-    }
 }
