@@ -38,7 +38,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 
 use phi_core::fields::LatticeKernels;
-use phi_flip::{Particles, Scene};
+use phi_flip::{Particles, RecordedFrame, Recording, Scene, TrajectoryArrays};
 use serde::Serialize;
 
 use crate::output::target::{OutputSubdir, Outputs, check_dir};
@@ -192,19 +192,15 @@ pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> 
         ..FrameStyle::default()
     };
     let mut gif: Option<GifWriter> = None;
-    let mut history: Vec<Frame> = Vec::with_capacity(steps + 1);
+    let mut history = Recording::new(d, dt, apic);
+    history.reserve(steps.saturating_add(1));
     let mut particles: Particles<B> = setup.particles;
-    let record = |p: &Particles<B>| Frame {
-        positions: p.positions.to_vec(),
-        velocities: p.velocities.to_vec(),
-        affine: apic.then(|| p.affine_or_zeros().to_vec()),
-    };
-    history.push(record(&particles));
+    history.push(&particles);
     let mut vtk = (options.vtk_every > 0)
         .then(|| VtkSeries::create(out, "simulation", "vtk"))
         .transpose()?;
     if let Some(series) = vtk.as_mut() {
-        write_vtk_frame(series, 0, &history[0], sim.params().dt, d)?;
+        write_vtk_frame(series, 0, &history.frames()[0], dt, d)?;
     }
 
     let bar = crate::progress::step_bar(steps, options.progress);
@@ -252,7 +248,12 @@ pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> 
 
     let mut run = || -> Result<()> {
         if options.frame_every > 0 {
-            render(0, &history[0].positions, &mut gif, &mut summary.frames)?;
+            render(
+                0,
+                &history.frames()[0].positions,
+                &mut gif,
+                &mut summary.frames,
+            )?;
         }
         for step in 0..steps {
             let started = Instant::now();
@@ -272,16 +273,16 @@ pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> 
             summary.substeps += stats.substeps;
             summary.steps = step + 1;
             summary.particles = particles.len();
-            history.push(record(&particles));
+            history.push(&particles);
             if let Some(series) = vtk.as_mut()
                 && (step + 1) % options.vtk_every == 0
             {
-                write_vtk_frame(series, step + 1, &history[step + 1], dt, d)?;
+                write_vtk_frame(series, step + 1, &history.frames()[step + 1], dt, d)?;
             }
             if options.frame_every > 0 && (step + 1) % options.frame_every == 0 {
                 render(
                     step + 1,
-                    &history[step + 1].positions,
+                    &history.frames()[step + 1].positions,
                     &mut gif,
                     &mut summary.frames,
                 )?;
@@ -290,7 +291,7 @@ pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> 
                 && (step + 1) % options.checkpoint_every == 0
                 && step + 1 < steps
             {
-                write_trajectory(out, &history, d, dt)?;
+                write_trajectory(out, &history)?;
                 summary.trajectory_frames = history.len();
                 write_run_file(out, &origin, scene, dt, d, &summary)?;
             }
@@ -305,7 +306,7 @@ pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> 
     summary.solver_iterations_mean = iterations_total as f64 / summary.steps.max(1) as f64;
     summary.steps_per_second = summary.steps as f64 / summary.simulation_seconds.max(1e-12);
     // What exists is written whether or not the run succeeded; on success its errors count.
-    let trajectory = write_trajectory(out, &history, d, dt);
+    let trajectory = write_trajectory(out, &history);
     if trajectory.is_ok() {
         summary.trajectory_frames = history.len();
     }
@@ -400,19 +401,11 @@ fn write_run_file(
     Ok(())
 }
 
-/// One recorded state: positions and velocities `[N * d]`, with APIC the affine matrices
-/// `[N * d * d]`.
-struct Frame {
-    positions: Vec<f32>,
-    velocities: Vec<f32>,
-    affine: Option<Vec<f32>>,
-}
-
 /// Frame `step` of the run as a VTK file of the series (all particles liquid).
 fn write_vtk_frame(
     series: &mut VtkSeries,
     step: usize,
-    frame: &Frame,
+    frame: &RecordedFrame,
     dt: f32,
     d: usize,
 ) -> Result<()> {
@@ -431,31 +424,18 @@ fn write_vtk_frame(
 }
 
 /// The trajectory so far as `trajectory.npz` (see the module docs).
-fn write_trajectory(out: &Path, history: &[Frame], d: usize, dt: f32) -> Result<()> {
-    let frames = history.len();
-    let n = history
-        .iter()
-        .map(|f| f.positions.len() / d)
-        .max()
-        .unwrap_or(0);
-    let mut positions = vec![f32::NAN; frames * n * d];
-    let mut velocities = vec![f32::NAN; frames * n * d];
-    let mut affine = history
-        .iter()
-        .any(|f| f.affine.is_some())
-        .then(|| vec![f32::NAN; frames * n * d * d]);
-    let mut counts = Vec::with_capacity(frames);
-    for (t, frame) in history.iter().enumerate() {
-        let (p, v) = (&frame.positions, &frame.velocities);
-        positions[t * n * d..t * n * d + p.len()].copy_from_slice(p);
-        velocities[t * n * d..t * n * d + v.len()].copy_from_slice(v);
-        if let (Some(all), Some(c)) = (affine.as_mut(), &frame.affine) {
-            let start = t * n * d * d;
-            all[start..start + c.len()].copy_from_slice(c);
-        }
-        counts.push((p.len() / d) as i32);
-    }
-    let time: Vec<f32> = (0..frames).map(|t| t as f32 * dt).collect();
+fn write_trajectory(out: &Path, history: &Recording) -> Result<()> {
+    let TrajectoryArrays {
+        frames,
+        particles: n,
+        dim: d,
+        positions,
+        velocities,
+        affine,
+        particle_count,
+        time,
+    } = history.arrays();
+    let counts: Vec<i32> = particle_count.iter().map(|&c| c as i32).collect();
     let mut arrays = vec![
         (
             "positions",

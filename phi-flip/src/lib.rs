@@ -7,6 +7,7 @@ pub mod loss;
 pub mod memory;
 pub mod optimize;
 mod random;
+pub mod record;
 mod scene;
 mod seed;
 mod sim;
@@ -20,6 +21,7 @@ pub use random::{
     BlockDraw, OBSTACLE_ATTEMPTS, ObstacleDraw, ParticleTrajectory, RandomScene, RandomSceneParams,
     SceneVariant, cell_centres, generate_random_scene, record_trajectory,
 };
+pub use record::{RecordedFrame, Recording, TrajectoryArrays, run_scene};
 pub use scene::{
     DomainSpec, InflowSpec, LiquidSpec, PlacementSpec, RunSpec, Scene, SceneSetup, Scheme,
     SimulationSpec, SolverSpec, TransferSpec,

@@ -1,0 +1,197 @@
+//! A run's states kept on the host, frame by frame, and their arrays `[T+1, N, d]`: what `phi
+//! simulate` writes as `trajectory.npz` and what [`run_scene`] returns to a library caller.
+//!
+//! With inflows the particle count grows; the arrays are as wide as the last frame and the rows
+//! of particles that do not exist yet are NaN, with `particle_count` saying how many exist.
+//!
+//! ```
+//! use phi_core::Backend;
+//! use phi_core::backend::ndarray::NdArray;
+//! use phi_flip::{Scene, run_scene};
+//!
+//! let scene = Scene::from_toml(
+//!     r#"
+//!     [domain]
+//!     resolution = [8, 8]
+//!     [simulation]
+//!     dt = 0.05
+//!     steps = 3
+//!     [[liquid]]
+//!     geometry = { type = "box", lower = [1, 1], upper = [4, 4] }
+//!     "#,
+//!     "<string>",
+//! )?;
+//! let recording = run_scene::<NdArray>(&scene, "<string>", None, &NdArray::default_device())?;
+//! let arrays = recording.arrays();
+//! assert_eq!(arrays.frames, 4);
+//! assert_eq!(arrays.positions.len(), 4 * arrays.particles * 2);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+use phi_core::Backend;
+use phi_core::fields::LatticeKernels;
+
+use crate::scene::Scene;
+use crate::sim::Particles;
+use crate::{Result, Scheme};
+
+/// One recorded state on the host: positions and velocities `[N * d]`, with APIC the affine
+/// matrices `[N * d * d]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordedFrame {
+    /// Positions `[N, d]` row-major, domain units.
+    pub positions: Vec<f32>,
+    /// Velocities `[N, d]` row-major, domain units per second.
+    pub velocities: Vec<f32>,
+    /// APIC's affine matrices `[N, d, d]` (zero in frame 0); `None` for the other schemes.
+    pub affine: Option<Vec<f32>>,
+}
+
+/// The states of a run so far, frame 0 (the initial state) first.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Recording {
+    dim: usize,
+    dt: f32,
+    apic: bool,
+    frames: Vec<RecordedFrame>,
+}
+
+/// A [`Recording`] as dense arrays (see the [module documentation](self)).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrajectoryArrays {
+    /// Recorded frames `T + 1`.
+    pub frames: usize,
+    /// Particles `N`: the most any frame holds.
+    pub particles: usize,
+    /// Dimension `d`.
+    pub dim: usize,
+    /// Positions `[T+1, N, d]`, NaN for particles that do not exist yet.
+    pub positions: Vec<f32>,
+    /// Velocities `[T+1, N, d]`, NaN for particles that do not exist yet.
+    pub velocities: Vec<f32>,
+    /// With APIC, the affine matrices `[T+1, N, d, d]`, NaN for particles that do not exist yet.
+    pub affine: Option<Vec<f32>>,
+    /// Particles that exist in each frame, `[T+1]`.
+    pub particle_count: Vec<usize>,
+    /// Each frame's time `t · dt`, seconds, `[T+1]`.
+    pub time: Vec<f32>,
+}
+
+impl Recording {
+    /// An empty recording of a `dim`-dimensional run with step `dt`; `apic` keeps the affine
+    /// matrices too.
+    pub fn new(dim: usize, dt: f32, apic: bool) -> Self {
+        Recording {
+            dim,
+            dt,
+            apic,
+            frames: Vec::new(),
+        }
+    }
+
+    /// Makes room for `frames` more frames.
+    pub fn reserve(&mut self, frames: usize) {
+        self.frames.reserve(frames);
+    }
+
+    /// Appends the state `particles` (read back to the host).
+    pub fn push<B: Backend>(&mut self, particles: &Particles<B>) {
+        self.frames.push(RecordedFrame {
+            positions: particles.positions.to_vec(),
+            velocities: particles.velocities.to_vec(),
+            affine: self.apic.then(|| particles.affine_or_zeros().to_vec()),
+        });
+    }
+
+    /// The recorded frames, frame 0 first.
+    pub fn frames(&self) -> &[RecordedFrame] {
+        &self.frames
+    }
+
+    /// The number of recorded frames.
+    pub fn len(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// Whether nothing has been recorded.
+    pub fn is_empty(&self) -> bool {
+        self.frames.is_empty()
+    }
+
+    /// The dimension of the run.
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+
+    /// The step length, seconds.
+    pub fn dt(&self) -> f32 {
+        self.dt
+    }
+
+    /// The frames as dense arrays, NaN-padded to the widest frame.
+    pub fn arrays(&self) -> TrajectoryArrays {
+        let (frames, d) = (self.frames.len(), self.dim);
+        let n = self
+            .frames
+            .iter()
+            .map(|f| f.positions.len() / d)
+            .max()
+            .unwrap_or(0);
+        let mut positions = vec![f32::NAN; frames * n * d];
+        let mut velocities = vec![f32::NAN; frames * n * d];
+        let mut affine = self
+            .frames
+            .iter()
+            .any(|f| f.affine.is_some())
+            .then(|| vec![f32::NAN; frames * n * d * d]);
+        let mut particle_count = Vec::with_capacity(frames);
+        for (t, frame) in self.frames.iter().enumerate() {
+            let (p, v) = (&frame.positions, &frame.velocities);
+            positions[t * n * d..t * n * d + p.len()].copy_from_slice(p);
+            velocities[t * n * d..t * n * d + v.len()].copy_from_slice(v);
+            if let (Some(all), Some(c)) = (affine.as_mut(), &frame.affine) {
+                let start = t * n * d * d;
+                all[start..start + c.len()].copy_from_slice(c);
+            }
+            particle_count.push(p.len() / d);
+        }
+        TrajectoryArrays {
+            frames,
+            particles: n,
+            dim: d,
+            positions,
+            velocities,
+            affine,
+            particle_count,
+            time: (0..frames).map(|t| t as f32 * self.dt).collect(),
+        }
+    }
+}
+
+/// Runs `scene` for `steps` steps (`None`: the scene's `simulation.steps`) on `device` and
+/// returns every state, frame 0 first: the simulation `phi simulate` runs, without its files.
+/// `origin` names the scene in errors.
+///
+/// # Errors
+/// [`crate::FlipError::Scene`] for a scene that cannot be built; the step's errors (an
+/// unstable or non-finite state, a failed pressure solve).
+pub fn run_scene<B: LatticeKernels>(
+    scene: &Scene,
+    origin: &str,
+    steps: Option<usize>,
+    device: &B::Device,
+) -> Result<Recording> {
+    let steps = steps.unwrap_or(scene.simulation.steps);
+    let setup = scene.build::<B>(origin, device)?;
+    let sim = setup.simulation;
+    let apic = scene.simulation.scheme == Scheme::Apic;
+    let mut recording = Recording::new(sim.domain().dim(), sim.params().dt, apic);
+    let mut particles = setup.particles;
+    recording.reserve(steps.saturating_add(1));
+    recording.push(&particles);
+    for step in 0..steps {
+        particles = sim.step(&particles, step)?.0;
+        recording.push(&particles);
+    }
+    Ok(recording)
+}
