@@ -1,0 +1,88 @@
+"""phi from Python: FLIP liquid simulation, GNS datasets and models, point-set distances."""
+
+import os
+from typing import Any, Dict, List, Optional, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+#: The backends of this build, the default first: ``["ndarray", "burn"]``.
+BACKENDS: List[str]
+
+class PhiError(Exception):
+    """The base class of every error phi_rs raises."""
+
+class SceneError(PhiError):
+    """A scene that cannot be read, parsed or built; the message names the file and the key."""
+
+class SimulationError(PhiError):
+    """A simulation step that failed: an unstable or non-finite state, a failed solve."""
+
+class DatasetError(PhiError):
+    """A dataset that cannot be read, or a split or index it does not have."""
+
+class ModelError(PhiError):
+    """A model directory that cannot be loaded, or input that does not fit the model."""
+
+class PointSetError(PhiError):
+    """Point sets that a distance cannot compare."""
+
+def simulate(
+    scene: Union[str, "os.PathLike[str]"],
+    steps: Optional[int] = None,
+    backend: str = "ndarray",
+) -> Dict[str, np.ndarray]:
+    """Runs a FLIP scene (a TOML file, or TOML text with a line break) and returns the arrays of
+    ``phi simulate``'s ``trajectory.npz``: ``positions``, ``velocities`` float32 ``[T+1, N, d]``,
+    ``particle_type`` int32 ``[N]``, ``particle_count`` int32 ``[T+1]``, ``time`` float32
+    ``[T+1]``, ``steps_completed`` int64 ``[1]`` (and ``affine`` for APIC scenes)."""
+
+def emd(a: npt.ArrayLike, b: npt.ArrayLike, cost: str = "sqeuclidean") -> float:
+    """The exact earth mover's distance between two ``[N, d]`` point sets: the mean ground cost
+    (``"sqeuclidean"`` or ``"euclidean"``) of the optimal one-to-one assignment."""
+
+class Dataset:
+    """A GNS dataset directory written by ``phi dataset generate``."""
+
+    def __init__(self, path: Union[str, "os.PathLike[str]"]) -> None: ...
+    @property
+    def path(self) -> str: ...
+    @property
+    def metadata(self) -> Dict[str, Any]:
+        """The content of ``metadata.json``."""
+    @property
+    def splits(self) -> List[str]: ...
+    def len(self, split: str = "train") -> int:
+        """The number of trajectories in ``split``."""
+    def __getitem__(
+        self, key: Tuple[str, int]
+    ) -> Tuple[npt.NDArray[np.float32], npt.NDArray[np.int64]]:
+        """``ds[split, i]``: positions float32 ``[frames, N, d]`` and particle types int64
+        ``[N]``."""
+
+class Model:
+    """A GNS model directory (``model.json`` + ``model.safetensors``)."""
+
+    @staticmethod
+    def load(dir: Union[str, "os.PathLike[str]"], backend: str = "ndarray") -> "Model": ...
+    @property
+    def dir(self) -> str: ...
+    @property
+    def backend(self) -> str: ...
+    @property
+    def dim(self) -> int: ...
+    @property
+    def input_velocities(self) -> int: ...
+    @property
+    def spec_dict(self) -> Dict[str, Any]:
+        """The content of ``model.json``."""
+    def rollout(
+        self,
+        positions: npt.ArrayLike,
+        particle_type: npt.ArrayLike,
+        steps: Optional[int] = None,
+        start: Optional[int] = None,
+    ) -> npt.NDArray[np.float32]:
+        """Rolls the model out from frame ``start`` (default ``C``) of a ground-truth trajectory
+        ``[T, N, d]``; returns the predicted frames ``[steps, N, d]``."""

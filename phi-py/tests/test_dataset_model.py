@@ -1,0 +1,92 @@
+"""phi_rs.Dataset reads what `phi dataset generate` wrote; phi_rs.Model rolls out as `phi
+rollout` does."""
+
+import json
+
+import numpy as np
+import pytest
+
+import phi_rs
+
+
+def test_dataset_metadata_and_lengths(dataset_dir):
+    ds = phi_rs.Dataset(dataset_dir)
+    on_disk = json.loads((dataset_dir / "metadata.json").read_text())
+    assert ds.metadata["dim"] == on_disk["dim"] == 2
+    assert ds.metadata["splits"] == on_disk["splits"]
+    assert ds.metadata["sequence_length"] == 12
+    assert ds.splits == ["train"]
+    assert ds.len("train") == 2
+    assert ds.len() == 2
+
+
+def test_dataset_trajectories_equal_the_files(dataset_dir):
+    ds = phi_rs.Dataset(dataset_dir)
+    for i in range(ds.len("train")):
+        positions, types = ds["train", i]
+        with np.load(dataset_dir / "train" / f"traj_{i:05d}.npz") as npz:
+            assert positions.dtype == np.float32
+            assert types.dtype == np.int64
+            assert positions.shape == (13, types.shape[0], 2)
+            assert np.array_equal(positions, npz["position"])
+            assert np.array_equal(types, npz["particle_type"])
+    last, _ = ds["train", -1]
+    assert np.array_equal(last, ds["train", 1][0])
+
+
+def test_dataset_errors_name_the_problem(dataset_dir, tmp_path):
+    ds = phi_rs.Dataset(dataset_dir)
+    with pytest.raises(phi_rs.DatasetError, match="index 2 is out of range"):
+        ds["train", 2]
+    with pytest.raises(phi_rs.DatasetError, match="valid"):
+        ds["valid", 0]
+    with pytest.raises(phi_rs.DatasetError, match="nothing-here"):
+        phi_rs.Dataset(tmp_path / "nothing-here")
+
+
+@pytest.fixture(scope="module")
+def cli_rollout(phi, model_dir, dataset_dir, tmp_path_factory):
+    out = tmp_path_factory.mktemp("rollout")
+    phi("rollout", "--model", model_dir, "--data", dataset_dir, "--split", "train",
+        "--trajectory", 0, "--steps", 5, "--out", out, "--frame-every", 0,
+        "--backend", "ndarray")
+    with np.load(out / "train_0" / "rollout.npz") as npz:
+        return {key: npz[key] for key in npz.files}
+
+
+def test_model_rollout_equals_cli_bit_for_bit(model_dir, dataset_dir, cli_rollout):
+    model = phi_rs.Model.load(model_dir)
+    assert model.dim == 2
+    assert model.input_velocities == 2
+    assert model.spec_dict["config"]["input_velocities"] == 2
+    positions, types = phi_rs.Dataset(dataset_dir)["train", 0]
+    start = int(cli_rollout["start"][0])
+    predicted = model.rollout(positions, types, steps=5, start=start)
+    assert predicted.dtype == np.float32
+    assert predicted.shape == cli_rollout["predicted_position"].shape
+    assert np.array_equal(predicted, cli_rollout["predicted_position"])
+    # Kinematic particles follow the ground truth.
+    kinematic = types == 0
+    if kinematic.any():
+        assert np.array_equal(predicted[:, kinematic], positions[start + 1:start + 6, kinematic])
+
+
+def test_model_rollout_to_the_end_by_default(model_dir, dataset_dir):
+    model = phi_rs.Model.load(model_dir, backend="ndarray")
+    positions, types = phi_rs.Dataset(dataset_dir)["train", 1]
+    predicted = model.rollout(positions, types)
+    assert predicted.shape == (positions.shape[0] - 3, positions.shape[1], 2)
+    assert np.isfinite(predicted).all()
+
+
+def test_model_errors(model_dir, dataset_dir, tmp_path):
+    with pytest.raises(phi_rs.ModelError, match="no-model"):
+        phi_rs.Model.load(tmp_path / "no-model")
+    model = phi_rs.Model.load(model_dir)
+    positions, types = phi_rs.Dataset(dataset_dir)["train", 0]
+    with pytest.raises(phi_rs.ModelError, match=r"positions: shape \(.*\): expected \[T, N, d\]"):
+        model.rollout(positions[0], types)
+    with pytest.raises(phi_rs.ModelError, match="particle_type"):
+        model.rollout(positions, types[:-1])
+    with pytest.raises(phi_rs.ModelError, match="rollout steps"):
+        model.rollout(positions, types, steps=100)
