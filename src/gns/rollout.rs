@@ -33,20 +33,18 @@ use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
 use phi_gns::data::{Dataset, METADATA_FILE, Trajectory};
 use phi_gns::model::{Gns, GnsKernels, ModelError, load_model, read_spec};
-use phi_gns::rollout::{RolloutRange, position_mse, rollout};
+use phi_gns::rollout::{RolloutRange, TrajectoryRollout, position_mse};
 use serde::{Deserialize, Serialize};
 
 use super::{BoundsFrom, bounds_for};
 use crate::backends::BackendKind;
 use crate::dataset::render::DatasetRenderer;
+use crate::output::sink::{Every, FrameSink, FrameView};
 use crate::output::target::{
     Marker, OutputSubdir, Outputs, Previous, check_not_a_file, previous_output,
 };
 use crate::output::vtk::{VtkFrame, VtkSeries};
-use crate::output::{
-    ArrayData, FrameStyle, GifWriter, NpyArray, OutputError, RgbImage, side_by_side, write_atomic,
-    write_npz,
-};
+use crate::output::{ArrayData, FrameStyle, GifWriter, NpyArray, side_by_side, write_npz};
 
 /// The value of [`RolloutRecord::format`].
 pub const ROLLOUT_FORMAT: &str = "phi-rollout";
@@ -404,104 +402,75 @@ fn roll_one<B: GnsKernels>(
     let kinematic = spec.kinematic(&trajectory.particle_type);
     let c = spec.config.input_velocities;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let mut record = RolloutRecord {
-        format: ROLLOUT_FORMAT.to_string(),
-        format_version: ROLLOUT_FORMAT_VERSION,
-        made_by: format!("phi rollout {}", env!("CARGO_PKG_VERSION")),
-        model: args.model.display().to_string(),
-        dataset: args.data.display().to_string(),
-        split: args.split.clone(),
-        index,
-        trajectory_seed: trajectory.seed,
-        backend: B::name().to_string(),
-        particles: n,
-        kinematic_particles: kinematic.iter().filter(|k| **k).count(),
-        input_velocities: c,
-        start: range.start,
-        window: [range.start - c, range.start],
-        steps_requested: range.steps,
-        steps: 0,
-        complete: false,
-        reason: Some(RUNNING.to_string()),
-        failed_step: None,
-        mse: Vec::with_capacity(range.steps),
-        mse_mean: None,
-        gif: None,
-        gif_pictures: 0,
-        wall_seconds: 0.0,
-        model_seconds: 0.0,
-    };
+    let mut record = RolloutRecord::start::<B>(args, index, &trajectory, &kinematic, c, range);
     // The record first: it marks the folder as ours.
     write_record(dir, &record)?;
-    let mut vtk = (args.vtk_every > 0)
-        .then(|| RolloutVtk::create(dir, plan.dataset.metadata().dt, &trajectory))
-        .transpose()?;
-    if let Some(vtk) = vtk.as_mut() {
-        let first = trajectory.frame(range.start);
-        vtk.add(range.start, first, first, first, first)?;
+    let mut sinks: Vec<Box<dyn FrameSink>> = Vec::new();
+    if args.vtk_every > 0 {
+        let vtk = RolloutVtk::create(dir, plan.dataset.metadata().dt, &trajectory)?;
+        sinks.push(Box::new(Every::new(args.vtk_every, vtk)));
     }
-
-    let renderer = if args.frame_every > 0 && dim == 2 {
-        Some(DatasetRenderer::new(
-            plan.dataset.metadata(),
-            args.pixels_per_cell,
-        )?)
-    } else {
-        None
-    };
-    let kinds = DatasetRenderer::kinds(&trajectory.particle_type);
-    let picture = |renderer: &DatasetRenderer, truth: &[f32], predicted: &[f32]| {
-        let left = renderer.render(truth, &kinds)?;
-        let right = renderer.render(predicted, &kinds)?;
-        Ok::<RgbImage, anyhow::Error>(side_by_side(
-            &[&left, &right],
-            GIF_GAP,
-            FrameStyle::default().background,
-        )?)
-    };
-    let mut gif: Option<GifWriter> = None;
-    if let Some(renderer) = &renderer {
-        let first = trajectory.frame(range.start);
-        let image = picture(renderer, first, first)?;
-        let mut writer = GifWriter::create(dir.join(GIF_FILE), image.width, image.height, 5)?;
-        writer.add_frame(&image)?;
-        gif = Some(writer);
+    if args.frame_every > 0 && dim == 2 {
+        let renderer = DatasetRenderer::new(plan.dataset.metadata(), args.pixels_per_cell)?;
+        let gif = RolloutGif::create(&dir.join(GIF_FILE), renderer, &trajectory)?;
+        sinks.push(Box::new(Every::new(args.frame_every, gif)));
         record.gif = Some(GIF_FILE.to_string());
-        record.gif_pictures = 1;
+    }
+    let first = trajectory.frame(range.start);
+    let start_view = FrameView {
+        frame: range.start,
+        step: 0,
+        positions: first,
+        before: first,
+        truth: Some((first, first)),
+    };
+    for sink in &mut sinks {
+        sink.add(&start_view)?;
     }
 
     let bar = progress_bar(range.steps, &rollout_dir_name(&args.split, index));
     let mut predicted: Vec<f32> = Vec::with_capacity(range.steps * n * dim);
     let started = Instant::now();
     let mut output_seconds = 0.0;
-    let mut output_error: Option<anyhow::Error> = None;
-    let result = rollout(model, &trajectory, range, device, |step, positions| {
-        let written = Instant::now();
-        let outcome = (|| -> Result<()> {
+    let written = (|| -> Result<()> {
+        for frame in TrajectoryRollout::new(model, &trajectory, range, device)? {
+            let frame = match frame {
+                Ok(frame) => frame,
+                Err(e) => {
+                    let step = record.steps + 1;
+                    record.failed_step = Some(step);
+                    record.reason = Some(match e {
+                        ModelError::NonFinitePrediction { .. } => e.to_string(),
+                        other => format!(
+                            "rollout step {step} (frame {}): {other}",
+                            range.start + step
+                        ),
+                    });
+                    return Ok(());
+                }
+            };
+            let output = Instant::now();
+            let (step, positions) = (frame.step, &frame.positions[..]);
+            let truth = trajectory.frame(frame.frame);
+            let before = match step {
+                1 => trajectory.frame(range.start),
+                _ => &predicted[(step - 2) * n * dim..(step - 1) * n * dim],
+            };
+            let view = FrameView {
+                frame: frame.frame,
+                step,
+                positions,
+                before,
+                truth: Some((truth, trajectory.frame(frame.frame - 1))),
+            };
+            for sink in &mut sinks {
+                sink.add(&view)?;
+            }
             predicted.extend_from_slice(positions);
-            let truth = trajectory.frame(range.start + step);
             record
                 .mse
                 .push(position_mse(positions, truth, &kinematic, dim));
             record.steps = step;
-            if let Some(vtk) = vtk.as_mut()
-                && step % args.vtk_every == 0
-            {
-                let before = step - 1;
-                let previous = if before == 0 {
-                    trajectory.frame(range.start)
-                } else {
-                    &predicted[(before - 1) * n * dim..before * n * dim]
-                };
-                let truth_before = trajectory.frame(range.start + before);
-                vtk.add(range.start + step, positions, previous, truth, truth_before)?;
-            }
-            if let (Some(renderer), Some(writer)) = (&renderer, gif.as_mut())
-                && step % args.frame_every == 0
-            {
-                writer.add_frame(&picture(renderer, truth, positions)?)?;
-                record.gif_pictures += 1;
-            }
             if args.checkpoint_every > 0 && step % args.checkpoint_every == 0 && step < range.steps
             {
                 record.wall_seconds = started.elapsed().as_secs_f64();
@@ -509,52 +478,121 @@ fn roll_one<B: GnsKernels>(
                 write_record(dir, &record)?;
             }
             bar.inc(1);
-            Ok(())
-        })();
-        output_seconds += written.elapsed().as_secs_f64();
-        outcome.map_err(|e| {
-            output_error = Some(e);
-            ModelError::Input {
-                what: "rollout output",
-                reason: "a file could not be written".into(),
-            }
-        })
-    });
+            output_seconds += output.elapsed().as_secs_f64();
+        }
+        record.complete = true;
+        record.reason = None;
+        Ok(())
+    })();
     bar.finish_and_clear();
-    if let Some(e) = output_error {
-        if let Some(writer) = gif {
-            let _ = writer.finish();
+    // The pictures of the start frame and of every `frame_every`-th step reached.
+    if record.gif.is_some() {
+        record.gif_pictures = 1 + record.steps / args.frame_every;
+    }
+    if let Err(e) = written {
+        // The first error stands; the outputs are closed as far as they can be.
+        for sink in sinks {
+            let _ = sink.finish();
         }
         return Err(e);
-    }
-    match result {
-        Ok(()) => {
-            record.complete = true;
-            record.reason = None;
-        }
-        Err(e) => {
-            let step = record.steps + 1;
-            record.failed_step = Some(step);
-            record.reason = Some(match e {
-                ModelError::NonFinitePrediction { .. } => e.to_string(),
-                other => format!(
-                    "rollout step {step} (frame {}): {other}",
-                    range.start + step
-                ),
-            });
-        }
     }
     record.mse_mean =
         (!record.mse.is_empty()).then(|| record.mse.iter().sum::<f64>() / record.mse.len() as f64);
     write_positions(dir, &trajectory, range.start, &predicted)?;
-    if let Some(writer) = gif {
-        writer.finish()?;
+    for sink in sinks {
+        sink.finish()?;
     }
     let elapsed = started.elapsed().as_secs_f64();
     record.model_seconds = (elapsed - output_seconds).max(0.0);
     record.wall_seconds = elapsed;
     write_record(dir, &record)?;
     Ok(record)
+}
+
+impl RolloutRecord {
+    /// The record of a rollout that is starting: nothing predicted yet, `"complete": false`.
+    fn start<B: GnsKernels>(
+        args: &RolloutArgs,
+        index: usize,
+        trajectory: &Trajectory,
+        kinematic: &[bool],
+        c: usize,
+        range: RolloutRange,
+    ) -> Self {
+        let n = trajectory.particles;
+        RolloutRecord {
+            format: ROLLOUT_FORMAT.to_string(),
+            format_version: ROLLOUT_FORMAT_VERSION,
+            made_by: format!("phi rollout {}", env!("CARGO_PKG_VERSION")),
+            model: args.model.display().to_string(),
+            dataset: args.data.display().to_string(),
+            split: args.split.clone(),
+            index,
+            trajectory_seed: trajectory.seed,
+            backend: B::name().to_string(),
+            particles: n,
+            kinematic_particles: kinematic.iter().filter(|k| **k).count(),
+            input_velocities: c,
+            start: range.start,
+            window: [range.start - c, range.start],
+            steps_requested: range.steps,
+            steps: 0,
+            complete: false,
+            reason: Some(RUNNING.to_string()),
+            failed_step: None,
+            mse: Vec::with_capacity(range.steps),
+            mse_mean: None,
+            gif: None,
+            gif_pictures: 0,
+            wall_seconds: 0.0,
+            model_seconds: 0.0,
+        }
+    }
+}
+
+/// The truth (left) and the prediction (right) of each frame it is given, side by side, as
+/// `rollout.gif`.
+struct RolloutGif {
+    renderer: DatasetRenderer,
+    kinds: Vec<u8>,
+    writer: Option<GifWriter>,
+    path: PathBuf,
+}
+
+impl RolloutGif {
+    fn create(path: &Path, renderer: DatasetRenderer, trajectory: &Trajectory) -> Result<Self> {
+        Ok(RolloutGif {
+            renderer,
+            kinds: DatasetRenderer::kinds(&trajectory.particle_type),
+            writer: None,
+            path: path.to_path_buf(),
+        })
+    }
+}
+
+impl FrameSink for RolloutGif {
+    fn add(&mut self, frame: &FrameView<'_>) -> Result<()> {
+        let truth = frame.truth.map_or(frame.positions, |(truth, _)| truth);
+        let left = self.renderer.render(truth, &self.kinds)?;
+        let right = self.renderer.render(frame.positions, &self.kinds)?;
+        let image = side_by_side(&[&left, &right], GIF_GAP, FrameStyle::default().background)?;
+        let writer = match &mut self.writer {
+            Some(writer) => writer,
+            None => {
+                self.writer
+                    .insert(GifWriter::create(&self.path, image.width, image.height, 5)?)
+            }
+        };
+        writer.add_frame(&image)?;
+        Ok(())
+    }
+
+    fn finish(self: Box<Self>) -> Result<()> {
+        if let Some(writer) = self.writer {
+            writer.finish()?;
+        }
+        Ok(())
+    }
 }
 
 /// The VTK series of a rollout: the prediction (`rollout.pvd`) and the truth (`truth.pvd`),
@@ -585,7 +623,7 @@ impl RolloutVtk {
     }
 
     /// Frame `frame`: the predicted and true positions and those of the frame before.
-    fn add(
+    fn add_frame(
         &mut self,
         frame: usize,
         predicted: &[f32],
@@ -613,6 +651,23 @@ impl RolloutVtk {
                 },
             )?;
         }
+        Ok(())
+    }
+}
+
+impl FrameSink for RolloutVtk {
+    fn add(&mut self, frame: &FrameView<'_>) -> Result<()> {
+        let (truth, truth_before) = frame.truth.unwrap_or((frame.positions, frame.before));
+        self.add_frame(
+            frame.frame,
+            frame.positions,
+            frame.before,
+            truth,
+            truth_before,
+        )
+    }
+
+    fn finish(self: Box<Self>) -> Result<()> {
         Ok(())
     }
 }
@@ -660,14 +715,7 @@ fn write_positions(
 
 /// `rollout.json`, atomically.
 fn write_record(dir: &Path, record: &RolloutRecord) -> Result<()> {
-    let mut text = serde_json::to_vec_pretty(record)?;
-    text.push(b'\n');
-    let path = dir.join(RECORD_FILE);
-    write_atomic(&path, |w| {
-        w.write_all(&text)
-            .map_err(|e| OutputError::io(&path, "cannot write", e))
-    })?;
-    Ok(())
+    Ok(phi_io::write_json(&dir.join(RECORD_FILE), record)?)
 }
 
 /// The steps whose MSE the summary prints: every step with `every_step` or at most 6 steps, else

@@ -7,6 +7,7 @@
 //!   ([`write_png`]) or streamed animated GIFs ([`GifWriter`]);
 //! - [`vtk`]: particle frames as VTK `.vtu` files and a `.pvd` series for ParaView
 //!   ([`vtk::VtkSeries`]);
+//! - [`sink`]: where a run's frames go as they are made ([`sink::FrameSink`]);
 //! - [`target`]: the rule every writing command applies to its target (new or empty, or its
 //!   own previous output, replaced only with `--force`).
 //!
@@ -17,6 +18,7 @@
 //! readers never see a half-written file.
 
 pub mod render;
+pub mod sink;
 pub mod target;
 pub mod vtk;
 
