@@ -422,6 +422,75 @@ fn rollout_writes_predictions_truth_mse_and_gif() {
         .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
     assert!(largest < 1e-5, "burn and ndarray differ by {largest}");
     assert!(!burn.join("test_1/rollout.gif").exists());
+
+    // The VTK series: the start frame and every third step, the prediction's points those of
+    // rollout.npz, its velocity the backward difference of the predicted frames over dt.
+    let vtk = dir.join("vtk");
+    ok(rollout(
+        &model,
+        &data,
+        &vtk,
+        &[
+            "--trajectory",
+            "1",
+            "--steps",
+            "8",
+            "--frame-every",
+            "0",
+            "--vtk-every",
+            "3",
+        ],
+    ));
+    let folder = vtk.join("test_1");
+    let listed = |pvd: &str| -> Vec<String> {
+        std::fs::read_to_string(folder.join(pvd))
+            .unwrap()
+            .lines()
+            .filter(|l| l.contains("<DataSet"))
+            .map(|l| {
+                let at = l.find("file=\"").unwrap() + 6;
+                l[at..at + l[at..].find('"').unwrap()].to_string()
+            })
+            .collect()
+    };
+    let files = listed("rollout.pvd");
+    assert_eq!(files.len(), 3, "frames 5, 8 and 11: {files:?}");
+    assert_eq!(listed("truth.pvd").len(), 3);
+    let dt = dataset.metadata().dt as f32;
+    let floats = |vtu: &str, name: &str| -> Vec<f32> {
+        super::vtu_array(vtu, name)
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+            .collect()
+    };
+    let frame = |step: usize| -> &[f32] {
+        match step {
+            0 => &truth.position[5 * n * dim..6 * n * dim],
+            s => &p[(s - 1) * n * dim..s * n * dim],
+        }
+    };
+    for (file, step) in files.iter().zip([0, 3, 6]) {
+        assert!(file.contains(&format!("{:05}", 5 + step)), "{file}");
+        let vtu = std::fs::read_to_string(folder.join(file)).unwrap();
+        let points = floats(&vtu, "Points");
+        let padded: Vec<f32> = frame(step)
+            .chunks(dim)
+            .flat_map(|q| [q[0], q[1], 0.0])
+            .collect();
+        assert_eq!(points, padded, "{file}");
+        let velocity = floats(&vtu, "velocity");
+        let before = frame(step.saturating_sub(1));
+        for i in 0..n {
+            for a in 0..dim {
+                let expected = (frame(step)[i * dim + a] - before[i * dim + a]) / dt;
+                let got = velocity[i * 3 + a];
+                assert!(
+                    (got - expected).abs() <= 1e-5 * expected.abs().max(1.0),
+                    "{file}: particle {i}, axis {a}: {got} vs {expected}"
+                );
+            }
+        }
+    }
     let _ = std::fs::remove_dir_all(dir);
 }
 
