@@ -351,4 +351,3 @@ pub fn position_scale(resolution: [usize; 2], scale: Option<f64>) -> (f32, f32) 
         None => (0.8 / resolution[0].max(resolution[1]) as f32, 0.1),
     }
 }
-
