@@ -38,6 +38,46 @@ def simulate(
     ``particle_type`` int32 ``[N]``, ``particle_count`` int32 ``[T+1]``, ``time`` float32
     ``[T+1]``, ``steps_completed`` int64 ``[1]`` (and ``affine`` for APIC scenes)."""
 
+class Simulation:
+    """A FLIP scene's simulation that steps on demand: the run ``simulate`` records, one step at
+    a time. After ``k`` steps its state is ``simulate(scene, steps=k)``'s frame ``k``, bit for
+    bit. Raises ``SceneError`` for a scene that cannot be read, parsed or built (the message
+    names the file and the key), ``PhiError`` for an unknown backend."""
+
+    def __init__(
+        self, scene: Union[str, "os.PathLike[str]"], backend: str = "ndarray"
+    ) -> None:
+        """Builds ``scene`` (a TOML file, or TOML text with a line break, as ``simulate`` takes
+        it) on ``backend`` at its initial state (step 0)."""
+    def step(self, n: int = 1) -> None:
+        """Advances ``n`` steps (``0`` does nothing), the GIL released during each. Python's
+        signals are checked after every step: Ctrl-C raises ``KeyboardInterrupt`` and leaves the
+        state at the last completed step; a failed step raises ``SimulationError`` and leaves it
+        at the step before. ``TypeError`` for a non-integer ``n``, ``ValueError`` for a negative
+        one."""
+    @property
+    def positions(self) -> npt.NDArray[np.float32]:
+        """Positions ``[N, d]`` of the current state (the particles that exist now)."""
+    @property
+    def velocities(self) -> npt.NDArray[np.float32]:
+        """Velocities ``[N, d]`` of the current state, domain units per second."""
+    @property
+    def particle_type(self) -> npt.NDArray[np.int32]:
+        """Particle types ``[N]`` of the current state (1 = liquid)."""
+    @property
+    def time(self) -> float:
+        """Simulated seconds, ``steps · dt`` (``simulate``'s ``time[steps]``)."""
+    @property
+    def steps(self) -> int:
+        """Steps done so far."""
+    @property
+    def dt(self) -> float:
+        """Step length, seconds."""
+    @property
+    def dim(self) -> int: ...
+    @property
+    def backend(self) -> str: ...
+
 def emd(a: npt.ArrayLike, b: npt.ArrayLike, cost: str = "sqeuclidean") -> float:
     """The exact earth mover's distance between two ``[N, d]`` point sets: the mean ground cost
     (``"sqeuclidean"`` or ``"euclidean"``) of the optimal one-to-one assignment."""

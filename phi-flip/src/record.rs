@@ -1,5 +1,6 @@
 //! A run's states kept on the host, frame by frame, and their arrays `[T+1, N, d]`: what `phi
-//! simulate` writes as `trajectory.npz` and what [`run_scene`] returns to a library caller.
+//! simulate` writes as `trajectory.npz` and what [`run_scene`] returns to a library caller;
+//! and [`SceneRun`], a scene's simulation stepped on demand, which `run_scene` steps.
 //!
 //! With inflows the particle count grows; the arrays are as wide as the last frame and the rows
 //! of particles that do not exist yet are NaN, with `particle_count` saying how many exist.
@@ -32,7 +33,7 @@ use phi_core::Backend;
 use phi_core::fields::LatticeKernels;
 
 use crate::scene::Scene;
-use crate::sim::Particles;
+use crate::sim::{FlipSimulation, Particles, StepStats};
 use crate::{Result, Scheme};
 
 /// One recorded state on the host: positions and velocities `[N * d]`, with APIC the affine
@@ -77,6 +78,18 @@ pub struct TrajectoryArrays {
     pub time: Vec<f32>,
 }
 
+impl RecordedFrame {
+    /// The state `particles` read back to the host; `apic` keeps the affine matrices (zero
+    /// where the state has none).
+    pub fn of<B: Backend>(particles: &Particles<B>, apic: bool) -> Self {
+        RecordedFrame {
+            positions: particles.positions.to_vec(),
+            velocities: particles.velocities.to_vec(),
+            affine: apic.then(|| particles.affine_or_zeros().to_vec()),
+        }
+    }
+}
+
 impl Recording {
     /// An empty recording of a `dim`-dimensional run with step `dt`; `apic` keeps the affine
     /// matrices too.
@@ -96,11 +109,7 @@ impl Recording {
 
     /// Appends the state `particles` (read back to the host).
     pub fn push<B: Backend>(&mut self, particles: &Particles<B>) {
-        self.frames.push(RecordedFrame {
-            positions: particles.positions.to_vec(),
-            velocities: particles.velocities.to_vec(),
-            affine: self.apic.then(|| particles.affine_or_zeros().to_vec()),
-        });
+        self.frames.push(RecordedFrame::of(particles, self.apic));
     }
 
     /// The recorded frames, frame 0 first.
@@ -168,9 +177,122 @@ impl Recording {
     }
 }
 
+/// A scene's simulation stepped on demand: the state after [`steps_done`](Self::steps_done)
+/// steps, advanced one step at a time by [`step`](Self::step). [`run_scene`] is this run
+/// stepped `steps` times, so the states are the same bit for bit.
+///
+/// ```
+/// use phi_core::backend::ndarray::NdArray;
+/// use phi_core::Backend;
+/// use phi_flip::{Scene, SceneRun, run_scene};
+///
+/// let scene = Scene::from_toml(
+///     r#"
+///     [domain]
+///     resolution = [8, 8]
+///     [simulation]
+///     dt = 0.05
+///     steps = 3
+///     [[liquid]]
+///     geometry = { type = "box", lower = [1, 1], upper = [4, 4] }
+///     "#,
+///     "<string>",
+/// )?;
+/// let device = NdArray::default_device();
+/// let mut run = SceneRun::<NdArray>::new(&scene, "<string>", &device)?;
+/// run.step()?;
+/// run.step()?;
+/// assert_eq!(run.steps_done(), 2);
+/// assert_eq!(run.time(), 2.0 * 0.05);
+/// let recording = run_scene::<NdArray>(&scene, "<string>", Some(2), &device)?;
+/// assert_eq!(run.frame(), recording.frames()[2]);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub struct SceneRun<B: Backend> {
+    simulation: FlipSimulation<B>,
+    particles: Particles<B>,
+    steps_done: usize,
+    scene_steps: usize,
+    apic: bool,
+}
+
+impl<B: LatticeKernels> SceneRun<B> {
+    /// Builds `scene` on `device` at step 0 (its initial state). `origin` names the scene in
+    /// errors.
+    ///
+    /// # Errors
+    /// [`crate::FlipError::Scene`] for a scene that cannot be built.
+    pub fn new(scene: &Scene, origin: &str, device: &B::Device) -> Result<Self> {
+        let setup = scene.build::<B>(origin, device)?;
+        Ok(SceneRun {
+            simulation: setup.simulation,
+            particles: setup.particles,
+            steps_done: 0,
+            scene_steps: scene.simulation.steps,
+            apic: scene.simulation.scheme == Scheme::Apic,
+        })
+    }
+
+    /// Advances the state one step. On an error the state stays at the last completed step.
+    ///
+    /// # Errors
+    /// The step's errors: an unstable or non-finite state, a failed pressure solve.
+    pub fn step(&mut self) -> Result<StepStats> {
+        let (particles, stats) = self.simulation.step(&self.particles, self.steps_done)?;
+        self.particles = particles;
+        self.steps_done += 1;
+        Ok(stats)
+    }
+
+    /// The current state.
+    pub fn particles(&self) -> &Particles<B> {
+        &self.particles
+    }
+
+    /// The current state on the host, as a [`Recording`] keeps it.
+    pub fn frame(&self) -> RecordedFrame {
+        RecordedFrame::of(&self.particles, self.apic)
+    }
+
+    /// The simulation the run steps.
+    pub fn simulation(&self) -> &FlipSimulation<B> {
+        &self.simulation
+    }
+
+    /// The steps done so far.
+    pub fn steps_done(&self) -> usize {
+        self.steps_done
+    }
+
+    /// The scene's `simulation.steps`.
+    pub fn scene_steps(&self) -> usize {
+        self.scene_steps
+    }
+
+    /// The simulated time of the current state, `steps_done · dt` seconds (as a [`Recording`]
+    /// writes it).
+    pub fn time(&self) -> f32 {
+        self.steps_done as f32 * self.simulation.params().dt
+    }
+
+    /// Whether the scene uses APIC (its states carry affine matrices).
+    pub fn apic(&self) -> bool {
+        self.apic
+    }
+
+    /// An empty [`Recording`] for this run's states.
+    pub fn recording(&self) -> Recording {
+        Recording::new(
+            self.simulation.domain().dim(),
+            self.simulation.params().dt,
+            self.apic,
+        )
+    }
+}
+
 /// Runs `scene` for `steps` steps (`None`: the scene's `simulation.steps`) on `device` and
 /// returns every state, frame 0 first: the simulation `phi simulate` runs, without its files.
-/// `origin` names the scene in errors.
+/// `origin` names the scene in errors. A [`SceneRun`] stepped `steps` times.
 ///
 /// # Errors
 /// [`crate::FlipError::Scene`] for a scene that cannot be built; the step's errors (an
@@ -181,17 +303,14 @@ pub fn run_scene<B: LatticeKernels>(
     steps: Option<usize>,
     device: &B::Device,
 ) -> Result<Recording> {
-    let steps = steps.unwrap_or(scene.simulation.steps);
-    let setup = scene.build::<B>(origin, device)?;
-    let sim = setup.simulation;
-    let apic = scene.simulation.scheme == Scheme::Apic;
-    let mut recording = Recording::new(sim.domain().dim(), sim.params().dt, apic);
-    let mut particles = setup.particles;
+    let mut run = SceneRun::<B>::new(scene, origin, device)?;
+    let steps = steps.unwrap_or(run.scene_steps());
+    let mut recording = run.recording();
     recording.reserve(steps.saturating_add(1));
-    recording.push(&particles);
-    for step in 0..steps {
-        particles = sim.step(&particles, step)?.0;
-        recording.push(&particles);
+    recording.push(run.particles());
+    for _ in 0..steps {
+        run.step()?;
+        recording.push(run.particles());
     }
     Ok(recording)
 }

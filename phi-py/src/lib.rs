@@ -3,6 +3,7 @@
 //! exceptions under `phi_rs.PhiError`, and long calls release the GIL.
 //!
 //! - `simulate`: a FLIP scene run as `phi simulate` runs it (phi-flip's `run_scene`);
+//! - `Simulation`: a FLIP scene stepped on demand (phi-flip's `SceneRun`);
 //! - `emd`: phi-core's exact earth mover's distance;
 //! - `Dataset`: phi-gns's dataset reader;
 //! - `Model`: a GNS model directory and phi-gns's rollout.
@@ -14,6 +15,7 @@ mod emd;
 mod error;
 mod model;
 mod simulate;
+mod simulation;
 
 use pyo3::prelude::*;
 
@@ -25,6 +27,7 @@ fn phi_rs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("BACKENDS", backend::available())?;
     m.add_function(wrap_pyfunction!(simulate::simulate, m)?)?;
     m.add_function(wrap_pyfunction!(emd::emd, m)?)?;
+    m.add_class::<simulation::Simulation>()?;
     m.add_class::<dataset::Dataset>()?;
     m.add_class::<model::Model>()?;
     m.add("PhiError", py.get_type::<error::PhiError>())?;

@@ -12,7 +12,7 @@ use crate::backend::with_backend;
 use crate::error::{Error, detached};
 
 /// The particle type of liquid in `trajectory.npz` (`phi simulate` writes only liquid).
-const LIQUID: i32 = 1;
+pub const LIQUID: i32 = 1;
 
 /// Runs a FLIP scene and returns its states: the arrays of the ``trajectory.npz`` that
 /// ``phi simulate`` writes, bit for bit.
@@ -57,14 +57,14 @@ pub fn simulate<'py>(
 }
 
 /// Where a scene comes from: a file or TOML text.
-enum SceneSource {
+pub enum SceneSource {
     File(PathBuf),
     Text(String),
 }
 
 impl SceneSource {
     /// A `str` with a line break is TOML text; any other `str` or path-like object a path.
-    fn from_python(scene: &Bound<'_, PyAny>) -> PyResult<Self> {
+    pub fn from_python(scene: &Bound<'_, PyAny>) -> PyResult<Self> {
         if let Ok(text) = scene.cast::<PyString>() {
             let text = text.to_cow()?;
             if text.contains('\n') {
@@ -75,7 +75,7 @@ impl SceneSource {
     }
 
     /// The scene and the name its errors use.
-    fn read(&self) -> Result<(Scene, String), Error> {
+    pub fn read(&self) -> Result<(Scene, String), Error> {
         Ok(match self {
             SceneSource::File(path) => (Scene::from_file(path)?, path.display().to_string()),
             SceneSource::Text(text) => {
