@@ -64,7 +64,7 @@ mod tests {
         let (w, h) = (120u32, 40u32);
         let mut rgb = vec![255u8; (3 * w * h) as usize];
         let (tw, th) = text_size("truth 12", 16.0).unwrap();
-        assert!(tw > 30 && tw < 100 && th >= 15 && th <= 20, "{tw}x{th}");
+        assert!(tw > 30 && tw < 100 && (15..=20).contains(&th), "{tw}x{th}");
         draw_text(&mut rgb, (w, h), "truth 12", (10, 5), 16.0, [0, 0, 0]).unwrap();
         let dark = |x: u32, y: u32| rgb[(3 * (y * w + x)) as usize] < 128;
         let mut inside = 0;

@@ -530,7 +530,7 @@ fn a_model_for_another_dimension_or_bounds_is_refused() {
             &out,
             &["--steps", "3", "--bounds", choice],
         ));
-        let arrays = read_npz(&out.join("test_0/rollout.npz")).unwrap();
+        let arrays = read_npz(out.join("test_0/rollout.npz")).unwrap();
         array(&arrays, "predicted_position").data
     };
     assert_eq!(predicted("data"), predicted("model"));

@@ -710,7 +710,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
 fn evaluate_all<B: GnsKernels>(
     plan: &Plan,
     args: &EvalArgs,
-) -> Result<(Vec<Vec<TrajectoryEvaluation>>, Vec<Option<KeptRollout>>)> {
+) -> Result<(Vec<Vec<TrajectoryEvaluation>>, KeptRollouts)> {
     let mut results: Vec<Vec<Option<TrajectoryEvaluation>>> =
         vec![vec![None; plan.indices.len()]; plan.models.len()];
     let mut todo = Vec::new();
@@ -876,6 +876,9 @@ fn evaluate_job<B: GnsKernels>(
 /// A model's rollout on the GIF's trajectory: its start frame `C` and the frames from there
 /// (the truth at `C`, then each prediction, up to the last finite one).
 type KeptRollout = (usize, Vec<Vec<f32>>);
+
+/// Each model's [`KeptRollout`], where its evaluation kept one.
+type KeptRollouts = Vec<Option<KeptRollout>>;
 
 /// Writes `rollouts.gif` of trajectory `--gif-trajectory`: the truth, then each model, side by
 /// side, every `--frame-every` frames from the start frame `C`. A model's frames are those kept

@@ -52,10 +52,13 @@ fn drawable(values: &[f64]) -> bool {
     values.iter().any(|v| v.is_finite() && *v > 0.0)
 }
 
+/// A metric of table B.1: its label, the unit its values are shown in, and how to read it.
+type Metric = (&'static str, f64, fn(&ModelSummary) -> Option<f64>);
+
 /// One bar chart per metric of table B.1, one bar per model (fig. 5.6); a model whose
 /// rollouts blew up has no bar for the rollout metrics.
 pub fn metric_bars(record: &EvalRecord, path: &Path) -> Result<()> {
-    let metrics: [(&str, f64, fn(&ModelSummary) -> Option<f64>); 4] = [
+    let metrics: [Metric; 4] = [
         ("EMD (10⁻²)", 1e-2, |s| s.emd),
         ("MSE-acc 1 (10⁻¹)", 1e-1, |s| Some(s.mse_acc1)),
         ("MSE 20 (10⁻⁵)", 1e-5, |s| s.mse20),

@@ -272,7 +272,10 @@ fn to_f64<T: Copy + Into<f64>>(
 ) -> Result<()> {
     out.clear();
     out.extend(values.iter().map(|&x| x.into()));
-    if let Some(at) = out.iter().position(|x| !(x.abs() <= LARGEST_COORDINATE)) {
+    if let Some(at) = out
+        .iter()
+        .position(|x| x.is_nan() || x.abs() > LARGEST_COORDINATE)
+    {
         return Err(PointSetError::Invalid {
             what: "earth mover's distance",
             reason: format!(
