@@ -8,7 +8,7 @@ use phi_core::backend::{CompareOp, ReduceOp};
 use phi_core::{Backend, Tensor, TensorError};
 
 use crate::error::{GeomError, Result};
-use crate::geometry::{AxisBox, Geometry, Rotated, members_apart};
+use crate::geometry::{AxisBox, Geometry, Rotated, UNION_PUSH_ROUNDS, members_apart};
 
 type TResult<T> = std::result::Result<T, TensorError>;
 
@@ -31,10 +31,6 @@ impl PushDirection {
         }
     }
 }
-
-/// How often an outward push of a [`Geometry::Union`] cycles through its members before the
-/// fallback (see [`Geometry::push`]).
-pub const UNION_PUSH_ROUNDS: usize = 4;
 
 /// Rounding margin, in units of the coordinates' magnitude, added to pushes whose landing point
 /// is computed rather than copied (balls, rotations), so that rounding cannot leave a pushed

@@ -820,13 +820,17 @@ impl Geometry {
                 let rounds = if members_apart(&members, 0.0) {
                     1.0
                 } else {
-                    crate::eval::UNION_PUSH_ROUNDS as f64
+                    UNION_PUSH_ROUNDS as f64
                 };
                 rounds * members.iter().map(|m| m.push_cost()).sum::<f64>()
             }
         }
     }
 }
+
+/// How often an outward push of a [`Geometry::Union`] cycles through its members before the
+/// fallback (see [`Geometry::push`]).
+pub const UNION_PUSH_ROUNDS: usize = 4;
 
 /// Whether the bounding boxes of `members`, grown by `grow` on every side, are pairwise
 /// disjoint (touching counts as overlapping): then a point pushed out of one member cannot land

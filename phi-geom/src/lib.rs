@@ -34,7 +34,9 @@ mod raster;
 mod rotation;
 
 pub use error::{GeomError, Result};
-pub use eval::{PushDirection, UNION_PUSH_ROUNDS};
-pub use geometry::{AxisBox, Geometry, MAX_DEPTH, MAX_PUSH_COST, Rotated, Sphere};
+pub use eval::PushDirection;
+pub use geometry::{
+    AxisBox, Geometry, MAX_DEPTH, MAX_PUSH_COST, Rotated, Sphere, UNION_PUSH_ROUNDS,
+};
 pub use obstacle::Obstacle;
 pub use rotation::Rotation;
