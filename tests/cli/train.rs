@@ -337,8 +337,28 @@ fn a_run_interrupted_by_sigint_or_killed_resumes_to_the_same_curve() {
                 "{signal}: {message}"
             );
         }
+        let lock = out.join("train.lock");
+        if signal != "-KILL" {
+            assert!(!lock.exists(), "{signal}: a stopped run frees its directory");
+        }
+        if name == "int" && cfg!(target_os = "linux") {
+            // A directory held by a running process (pid 1 runs on every Linux system) is
+            // refused, and its lock left as it is.
+            std::fs::write(&lock, "1\n").unwrap();
+            let refused = resume(&out, &[]);
+            assert!(!refused.status.success(), "a held directory was resumed");
+            let message = stderr(&refused);
+            assert!(
+                message.contains("in use by another `phi train` (process 1)"),
+                "{message}"
+            );
+            assert_eq!(std::fs::read_to_string(&lock).unwrap(), "1\n");
+            std::fs::remove_file(&lock).unwrap();
+        }
+        // A killed run's lock names a process that is gone: the resume takes it over.
         let done = ok(resume(&out, &[]));
         assert!(done.contains("steps in"), "{done}");
+        assert!(!lock.exists(), "a finished run frees its directory");
         assert_eq!(losses(&out), losses(&whole), "{name}");
         assert_eq!(final_weights(&out, steps), final_weights(&whole, steps));
     }

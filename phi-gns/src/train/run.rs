@@ -11,6 +11,8 @@
 //!   screening rows, `valid_mse_acc1` and `valid_rollout_mse`;
 //! - `checkpoints/step-…/`: the newest `checkpoints.keep` checkpoints ([`super::checkpoint`]);
 //! - `best/`: the model with the best screening metric so far.
+//! - `train.lock` ([`LOCK_FILE`]): the process id of the run while it is open, so that a
+//!   second run on the directory is refused; a killed run's lock is taken over.
 //!
 //! With `training.ema_decay`, the run keeps a moving average of its weights
 //! ([`super::WeightAverage`]): screening reads the average, `best/` holds it, and each
@@ -114,6 +116,8 @@ pub struct TrainingRun<B: AutodiffBackend + GnsKernels> {
     device: B::Device,
     log_started: Instant,
     log_steps: u64,
+    /// Held while the run is open; dropping the run frees the directory.
+    _lock: RunLock,
 }
 
 impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
@@ -138,8 +142,12 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
             "preset": options.preset,
             "init_from": options.init_from.as_ref().map(|p| p.display().to_string()),
         });
+        // One process at a time in a run's directory: a resumed run takes the lock before it
+        // touches anything, a new one as soon as its files exist.
+        let mut lock = None;
         if options.resume {
             check_resumable(out, options, config, B::name())?;
+            lock = Some(RunLock::acquire(out)?);
         } else {
             check_fresh(out)?;
         }
@@ -206,6 +214,7 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
         if !options.resume {
             // Only now that the dataset, both splits and the model are known to work.
             write_run_files(out, options, B::name())?;
+            lock = Some(RunLock::acquire(out)?);
         }
         let mut run = TrainingRun {
             out: out.clone(),
@@ -219,6 +228,7 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
             device: device.clone(),
             log_started: Instant::now(),
             log_steps: 0,
+            _lock: lock.expect("both branches take the lock"),
         };
         if !options.resume {
             // A run killed before its first periodic checkpoint can still be resumed.
@@ -445,6 +455,77 @@ fn checkpoint_error(path: &Path, reason: impl std::fmt::Display) -> TrainError {
 }
 
 /// A fresh run needs `out` missing or empty.
+/// The lock file of a training directory: the process id of the run that holds it.
+pub const LOCK_FILE: &str = "train.lock";
+
+/// A training directory held by this process ([`LOCK_FILE`]), freed when dropped. A lock left by
+/// a process that no longer runs (a run that was killed) is taken over.
+#[derive(Debug)]
+struct RunLock {
+    path: PathBuf,
+}
+
+impl RunLock {
+    fn acquire(out: &Path) -> Result<Self, TrainError> {
+        let path = out.join(LOCK_FILE);
+        let me = std::process::id();
+        // Twice at most: once to find a stale lock, once to take its place.
+        for _ in 0..2 {
+            match std::fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(&path)
+            {
+                Ok(mut file) => {
+                    writeln!(file, "{me}").map_err(|e| checkpoint_error(&path, e))?;
+                    return Ok(RunLock { path });
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                    let holder = std::fs::read_to_string(&path)
+                        .ok()
+                        .and_then(|text| text.trim().parse::<u32>().ok());
+                    if let Some(pid) = holder.filter(|&pid| pid != me && process_runs(pid)) {
+                        return Err(checkpoint_error(
+                            out,
+                            format!(
+                                "is in use by another `phi train` (process {pid}); wait for it \
+                                 to end, or delete {LOCK_FILE} if no such process runs"
+                            ),
+                        ));
+                    }
+                    match std::fs::remove_file(&path) {
+                        Ok(()) => {}
+                        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                        Err(e) => return Err(checkpoint_error(&path, e)),
+                    }
+                }
+                Err(e) => return Err(checkpoint_error(&path, e)),
+            }
+        }
+        Err(checkpoint_error(
+            &path,
+            "another process keeps taking the lock; is a second `phi train` starting here?",
+        ))
+    }
+}
+
+impl Drop for RunLock {
+    fn drop(&mut self) {
+        // Best effort: a lock that stays behind is taken over by the next run.
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// Whether process `pid` runs (on Linux, from `/proc`; elsewhere every holder is taken to run,
+/// and the message says how to free the directory).
+fn process_runs(pid: u32) -> bool {
+    if cfg!(target_os = "linux") {
+        Path::new(&format!("/proc/{pid}")).exists()
+    } else {
+        true
+    }
+}
+
 fn check_fresh(out: &Path) -> Result<(), TrainError> {
     if !out.exists() {
         return Ok(());
