@@ -339,7 +339,10 @@ fn a_run_interrupted_by_sigint_or_killed_resumes_to_the_same_curve() {
         }
         let lock = out.join("train.lock");
         if signal != "-KILL" {
-            assert!(!lock.exists(), "{signal}: a stopped run frees its directory");
+            assert!(
+                !lock.exists(),
+                "{signal}: a stopped run frees its directory"
+            );
         }
         if name == "int" && cfg!(target_os = "linux") {
             // A directory held by a running process (pid 1 runs on every Linux system) is
