@@ -201,16 +201,7 @@ impl<B: phi_core::Backend> GraphBatch<B> {
     /// # Errors
     /// [`ModelError::Input`] for another shape.
     pub fn with_positions(&self, positions: Tensor<B>) -> Result<Self, ModelError> {
-        if positions.shape() != self.positions.shape() {
-            return Err(ModelError::Input {
-                what: "positions",
-                reason: format!(
-                    "shape {:?} replaces {:?}",
-                    positions.shape(),
-                    self.positions.shape()
-                ),
-            });
-        }
+        self.check_same_shape(&positions)?;
         Ok(GraphBatch {
             positions,
             ..self.clone()
@@ -226,16 +217,7 @@ impl<B: phi_core::Backend> GraphBatch<B> {
     /// [`ModelError::Input`] for another shape; [`ModelError::Graph`] for non-finite latest
     /// positions.
     pub fn regraph(&self, positions: Tensor<B>, spec: &ModelSpec) -> Result<Self, ModelError> {
-        if positions.shape() != self.positions.shape() {
-            return Err(ModelError::Input {
-                what: "positions",
-                reason: format!(
-                    "shape {:?} replaces {:?}",
-                    positions.shape(),
-                    self.positions.shape()
-                ),
-            });
-        }
+        self.check_same_shape(&positions)?;
         let latest = features::latest_positions(&positions)?.to_vec();
         self.regraph_from(positions, &latest, spec)
     }
@@ -285,9 +267,22 @@ impl<B: phi_core::Backend> GraphBatch<B> {
                 ),
             });
         }
-        let kept = self.positions.narrow(1, 1..window)?;
-        let positions = Tensor::concat(&[kept, next.unsqueeze(1)?], 1)?;
-        self.regraph_from(positions, &next.to_vec(), spec)
+        self.advance_from(next, &next.to_vec(), spec)
+    }
+
+    /// [`ModelError::Input`] unless `positions` has the shape of this batch's window.
+    fn check_same_shape(&self, positions: &Tensor<B>) -> Result<(), ModelError> {
+        if positions.shape() == self.positions.shape() {
+            return Ok(());
+        }
+        Err(ModelError::Input {
+            what: "positions",
+            reason: format!(
+                "shape {:?} replaces {:?}",
+                positions.shape(),
+                self.positions.shape()
+            ),
+        })
     }
 
     /// [`GraphBatch::advance`] with `next`'s values already on the host (`host`, `[N, dim]`
