@@ -28,20 +28,24 @@
 use phi_core::tensor::Tensor;
 
 use crate::data::Trajectory;
-use crate::model::{Gns, GnsKernels, GraphBatch, ModelError};
+use crate::model::{Gns, GnsKernels, GraphBatch, ModelError, Walls};
 
 /// A model stepping a window forward on the device, its predictions fed back.
 ///
 /// Each [`Rollout::step`] predicts every particle's next positions, replaces those of the
 /// kinematic particles (the model's `kinematic_types`) by the positions the caller gives, and
 /// slides the window one frame on (the oldest frame dropped, the radius graph rebuilt per
-/// example). Gradients flow through the steps when the window or the parameters carry them.
+/// example). With [`Walls::Clamp`] in the model's configuration the predicted positions are
+/// first clamped into the closed box of the model's bounds (no gradient flows through a clamped
+/// coordinate). Gradients flow through the steps when the window or the parameters carry them.
 #[derive(Debug)]
 pub struct Rollout<'m, B: GnsKernels> {
     model: &'m Gns<B>,
     window: GraphBatch<B>,
     /// `[N, 1]`: 1 where a particle follows the model, 0 where it is kinematic.
     follows_model: Tensor<B>,
+    /// `[1, dim]` lower and upper bounds the predictions are clamped into ([`Walls::Clamp`]).
+    clamp: Option<(Tensor<B>, Tensor<B>)>,
     /// The positions of the last step, not yet slid into the window, and their host values
     /// once read.
     pending: Option<(Tensor<B>, Option<Vec<f32>>)>,
@@ -92,10 +96,25 @@ impl<'m, B: GnsKernels> Rollout<'m, B> {
                 reason: format!("shape {:?} for {n} particles", mask.shape()),
             });
         }
+        let spec = model.spec();
+        let clamp = match spec.config.walls {
+            Walls::Open => None,
+            Walls::Clamp => {
+                let device = window.positions().device();
+                let d = spec.config.dim;
+                let side =
+                    |i: usize| -> Vec<f32> { spec.bounds.iter().map(|b| b[i] as f32).collect() };
+                Some((
+                    Tensor::from_vec(side(0), &[1, d], &device)?,
+                    Tensor::from_vec(side(1), &[1, d], &device)?,
+                ))
+            }
+        };
         Ok(Rollout {
             model,
             window,
             follows_model: mask.reshape(&[n, 1])?,
+            clamp,
             pending: None,
         })
     }
@@ -134,7 +153,10 @@ impl<'m, B: GnsKernels> Rollout<'m, B> {
         kinematic: &Tensor<B>,
     ) -> Result<&Tensor<B>, ModelError> {
         self.slide()?;
-        let predicted = self.model.integrate(&self.window, normalised)?;
+        let mut predicted = self.model.integrate(&self.window, normalised)?;
+        if let Some((lower, upper)) = &self.clamp {
+            predicted = predicted.maximum(lower)?.minimum(upper)?;
+        }
         if kinematic.shape() != predicted.shape() {
             return Err(ModelError::Input {
                 what: "kinematic positions",

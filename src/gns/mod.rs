@@ -38,6 +38,26 @@ pub enum BoundsFrom {
     Model,
 }
 
+/// `--walls`: what a rollout does at the domain's walls ([`phi_gns::model::Walls`]), instead of
+/// what the model's `model.json` says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum WallsArg {
+    /// Predicted positions are taken as they are, wherever they lie.
+    Open,
+    /// Predicted positions are clamped into the domain's closed box, as FLIP clamps its
+    /// particles.
+    Clamp,
+}
+
+impl From<WallsArg> for phi_gns::model::Walls {
+    fn from(arg: WallsArg) -> Self {
+        match arg {
+            WallsArg::Open => phi_gns::model::Walls::Open,
+            WallsArg::Clamp => phi_gns::model::Walls::Clamp,
+        }
+    }
+}
+
 /// Checks that `metadata` (read from `path`) fits the model of `spec` and returns the bounds the
 /// model should run with: `None` to keep its own. Without `choice`, a model with boundary
 /// features refuses other bounds, with a hint at `--bounds`.

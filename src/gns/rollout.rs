@@ -32,11 +32,11 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
 use phi_gns::data::{Dataset, METADATA_FILE, Trajectory};
-use phi_gns::model::{Gns, GnsKernels, ModelError, load_model, read_spec};
+use phi_gns::model::{Gns, GnsKernels, ModelError, Walls, load_model, read_spec};
 use phi_gns::rollout::{RolloutRange, TrajectoryRollout, position_mse};
 use serde::{Deserialize, Serialize};
 
-use super::{BoundsFrom, bounds_for};
+use super::{BoundsFrom, WallsArg, bounds_for};
 use crate::backends::BackendKind;
 use crate::dataset::render::DatasetRenderer;
 use crate::output::sink::{Every, FrameSink, FrameView};
@@ -147,6 +147,11 @@ pub struct RolloutArgs {
     /// dataset].
     #[arg(long, value_enum)]
     pub bounds: Option<BoundsFrom>,
+    /// What the rollout does at the domain's walls: `open` (predictions as they are) or `clamp`
+    /// (into the domain's box, as FLIP clamps its particles) [default: the model's `walls`,
+    /// open when model.json has none].
+    #[arg(long, value_enum)]
+    pub walls: Option<WallsArg>,
 }
 
 /// `rollout.json`: one trajectory's rollout.
@@ -160,6 +165,9 @@ pub struct RolloutRecord {
     pub made_by: String,
     /// The model directory, as given.
     pub model: String,
+    /// What the rollout did at the domain's walls (absent: open).
+    #[serde(default, skip_serializing_if = "Walls::is_open")]
+    pub walls: Walls,
     /// The dataset directory, as given.
     pub dataset: String,
     /// The split.
@@ -372,6 +380,9 @@ fn roll_all<B: GnsKernels>(
     if let Some(bounds) = &plan.bounds {
         model = model.with_bounds(bounds.clone())?;
     }
+    if let Some(walls) = args.walls {
+        model = model.with_walls(walls.into());
+    }
     for previous in previous {
         previous.remove()?;
     }
@@ -403,6 +414,7 @@ fn roll_one<B: GnsKernels>(
     let c = spec.config.input_velocities;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut record = RolloutRecord::start::<B>(args, index, &trajectory, &kinematic, c, range);
+    record.walls = spec.config.walls;
     // The record first: it marks the folder as ours.
     write_record(dir, &record)?;
     let mut sinks: Vec<Box<dyn FrameSink>> = Vec::new();
@@ -525,6 +537,7 @@ impl RolloutRecord {
             format_version: ROLLOUT_FORMAT_VERSION,
             made_by: format!("phi rollout {}", env!("CARGO_PKG_VERSION")),
             model: args.model.display().to_string(),
+            walls: Walls::Open,
             dataset: args.data.display().to_string(),
             split: args.split.clone(),
             index,

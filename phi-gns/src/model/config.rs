@@ -15,7 +15,7 @@ pub const MODEL_FORMAT: &str = "phi-gns-model";
 pub const MODEL_FORMAT_VERSION: u32 = 1;
 
 /// The sizes and options of a GNS (Sanchez-Gonzalez et al. 2020; thesis section 5.1). Every key
-/// is required in `model.json`; unknown keys are errors.
+/// but `walls` is required in `model.json`; unknown keys are errors.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GnsConfig {
@@ -44,6 +44,34 @@ pub struct GnsConfig {
     /// `σ`, the standard deviation of the training noise (0 without noise); it widens the
     /// normalisation of velocities and accelerations as in DeepMind's code.
     pub noise_std: f64,
+    /// What a rollout does at the domain's walls (absent: [`Walls::Open`]).
+    #[serde(default, skip_serializing_if = "Walls::is_open")]
+    pub walls: Walls,
+}
+
+/// What a rollout does with a predicted position beyond the domain's walls (the model's
+/// `bounds`).
+///
+/// The network itself never sees this: training and the one-step prediction are the same
+/// either way. It is a property of the simulator the model is part of, as the FLIP solver that
+/// made the data ends each of its steps by clamping every particle into the domain's closed box.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Walls {
+    /// The predicted positions are taken as they are, wherever they lie (DeepMind's GNS).
+    #[default]
+    Open,
+    /// Each predicted position is clamped into the closed box of the model's `bounds` before it
+    /// joins the window, as FLIP clamps its particles: a particle that reaches a wall stops
+    /// there, and its next velocity, read from the window, loses the part into the wall.
+    Clamp,
+}
+
+impl Walls {
+    /// Whether this is [`Walls::Open`] (the default, left out of `model.json`).
+    pub fn is_open(&self) -> bool {
+        *self == Walls::Open
+    }
 }
 
 impl GnsConfig {
@@ -63,6 +91,7 @@ impl GnsConfig {
             embedding_size: 16,
             boundary_features: true,
             noise_std: 0.0,
+            walls: Walls::Open,
         }
     }
 

@@ -51,7 +51,7 @@ use phi_core::tensor::Tensor;
 
 use crate::graph::GraphError;
 pub use batch::GraphBatch;
-pub use config::{GnsConfig, MODEL_FORMAT, MODEL_FORMAT_VERSION, ModelSpec, Normalisation};
+pub use config::{GnsConfig, MODEL_FORMAT, MODEL_FORMAT_VERSION, ModelSpec, Normalisation, Walls};
 pub use features::Normalisers;
 pub use files::{MODEL_FILE, WEIGHTS_FILE, load_model, read_spec, save_model};
 pub use floor::Floor;
@@ -263,6 +263,14 @@ impl<B: GnsKernels> Gns<B> {
         let mut spec = self.spec.clone();
         spec.bounds = bounds;
         Self::new(spec, self.params.clone())
+    }
+
+    /// The same model with other walls for its rollouts ([`Walls`]); the network and its
+    /// predictions of one step are unchanged.
+    pub fn with_walls(&self, walls: Walls) -> Self {
+        let mut model = self.clone();
+        model.spec.config.walls = walls;
+        model
     }
 
     /// The normalisation constants and bounds as `[dim]` tensors.

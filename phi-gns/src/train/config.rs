@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{AdamConfig, ErrorNorm, Pushforward, TrainError};
 use crate::data::{Metadata, Variant};
-use crate::model::{GnsConfig, ModelSpec};
+use crate::model::{GnsConfig, ModelSpec, Walls};
 
 /// The content of a training preset.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -67,6 +67,10 @@ pub struct ModelSection {
     pub boundary_features: bool,
     /// `σ` of the random-walk input noise (6.7e-4 for `1sn`, 0 for none).
     pub noise_std: f64,
+    /// What the model's rollouts (screening among them) do at the domain's walls: `"open"`
+    /// (the default) or `"clamp"` ([`Walls`]).
+    #[serde(default, skip_serializing_if = "Walls::is_open")]
+    pub walls: Walls,
     /// The seed of the initial weights.
     pub seed: u64,
 }
@@ -401,6 +405,7 @@ impl TrainConfig {
             embedding_size: m.embedding_size,
             boundary_features: m.boundary_features,
             noise_std: m.noise_std,
+            walls: m.walls,
         };
         let spec = ModelSpec::for_dataset(metadata, config, m.seed);
         spec.validate(metadata_path).map_err(|e| match e {

@@ -1,10 +1,11 @@
 //! Rollouts on small synthetic trajectories: kinematic particles follow the ground truth, the
 //! predictions feed back into the window, ranges are checked, and a rollout that produces a
-//! non-finite position stops there with the frames before it delivered.
+//! non-finite position stops there with the frames before it delivered; clamped walls stop a
+//! particle at the wall and leave its motion along it.
 
 use phi_core::Tensor;
 use phi_gns::data::{LIQUID, OBSTACLE, Trajectory};
-use phi_gns::model::{Gns, GnsKernels, GraphBatch, ModelError, Parameters};
+use phi_gns::model::{Floor, Gns, GnsKernels, GraphBatch, ModelError, Parameters, Walls};
 use phi_gns::rollout::{Rollout, RolloutRange, TrajectoryRollout, rollout, rollout_positions};
 
 use crate::common::{self, Rng, bits, perturbed};
@@ -15,6 +16,7 @@ phi_core::backend_tests!(
     an_overflow_stops_the_rollout_at_the_step_it_happens,
     the_device_stepper_equals_a_window_rebuilt_on_the_host_every_step,
     the_stepper_reads_each_frame_once_and_slides_it_in,
+    clamped_walls_stop_a_particle_at_the_wall_and_keep_its_motion_along_it,
 );
 
 /// `C` of the models here (the thesis' 5).
@@ -383,4 +385,80 @@ fn the_stepper_reads_each_frame_once_and_slides_it_in<B: GnsKernels>() {
             ..
         })
     ));
+}
+
+/// The constant-velocity floor rolled out on two liquid particles moving in straight lines: one
+/// towards the right wall (x = 0.9) and up, one in the middle of the domain. With open walls
+/// both go on in straight lines; with clamped walls the first stops on the wall after the step
+/// that would cross it (x = 0.9 from then on, so its velocity across the wall, read from the
+/// window, drops to 0 two steps later), keeps moving up at its velocity, and the second moves
+/// exactly as with open walls.
+fn clamped_walls_stop_a_particle_at_the_wall_and_keep_its_motion_along_it<B: GnsKernels>() {
+    let device = B::default_device();
+    let metadata = common::metadata();
+    let open = Floor::ConstantVelocity
+        .model::<B>(&metadata, C, &device)
+        .unwrap();
+    assert_eq!(open.spec().config.walls, Walls::Open);
+    let clamped = open.with_walls(Walls::Clamp);
+    let (start, velocity) = (
+        [[0.80f32, 0.40], [0.50, 0.50]],
+        [[0.02f32, 0.01], [0.01, -0.01]],
+    );
+    let frames: Vec<Vec<f32>> = (0..=C)
+        .map(|t| {
+            let t = t as f32 - C as f32;
+            (0..2)
+                .flat_map(|i| (0..2).map(move |a| start[i][a] + velocity[i][a] * t))
+                .collect()
+        })
+        .collect();
+    let refs: Vec<&[f32]> = frames.iter().map(Vec::as_slice).collect();
+    let types = [LIQUID, LIQUID];
+    let steps = 12;
+    let run = |model: &Gns<B>| -> Vec<Vec<f32>> {
+        let batch =
+            GraphBatch::from_host(&window(&refs, 2), &types, model.spec(), &device).unwrap();
+        let mut stepper = Rollout::new(model, batch).unwrap();
+        let unused = Tensor::zeros(&[2, 2], &device);
+        (0..steps)
+            .map(|_| {
+                stepper.step(&unused).unwrap();
+                stepper.read().to_vec()
+            })
+            .collect()
+    };
+    let (free, walled) = (run(&open), run(&clamped));
+    for k in 1..=steps {
+        let (f, w) = (&free[k - 1], &walled[k - 1]);
+        let straight = |i: usize, a: usize| start[i][a] + velocity[i][a] * k as f32;
+        for a in 0..2 {
+            assert!(
+                (f[a] - straight(0, a)).abs() < 1e-5,
+                "open, step {k}: {f:?}"
+            );
+            assert!(
+                (f[2 + a] - straight(1, a)).abs() < 1e-5,
+                "open, step {k}: {f:?}"
+            );
+            assert_eq!(
+                w[2 + a].to_bits(),
+                f[2 + a].to_bits(),
+                "clamped, middle, step {k}"
+            );
+        }
+        // Along the wall: the straight line, clamped or not.
+        assert!(
+            (w[1] - straight(0, 1)).abs() < 1e-5,
+            "clamped, step {k}: {w:?}"
+        );
+        // Across it: the straight line until it would cross 0.9 (after step 5), the wall after.
+        let across = straight(0, 0).min(0.9);
+        assert!((w[0] - across).abs() < 1e-5, "clamped, step {k}: {w:?}");
+        assert!(w[0] <= 0.9, "clamped, step {k}: {} beyond the wall", w[0]);
+    }
+    assert!(
+        free[steps - 1][0] > 1.0,
+        "the open rollout leaves the domain"
+    );
 }

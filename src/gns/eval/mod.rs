@@ -40,7 +40,8 @@ use phi_gns::eval::{
     evaluate_trajectory_with, one_step_errors,
 };
 use phi_gns::model::{
-    Floor, Gns, GnsKernels, MODEL_FILE, ModelError, ModelSpec, WEIGHTS_FILE, load_model, read_spec,
+    Floor, Gns, GnsKernels, MODEL_FILE, ModelError, ModelSpec, WEIGHTS_FILE, Walls, load_model,
+    read_spec,
 };
 use phi_gns::rollout::{RolloutRange, rollout};
 use rayon::prelude::*;
@@ -123,6 +124,11 @@ pub struct EvalArgs {
     /// and bounds. Repeat for several models.
     #[arg(long = "model-data", value_name = "NAME=DATASET")]
     pub model_data: Vec<String>,
+    /// `NAME=WALLS`: roll the model named NAME out with `open` or `clamp` walls instead of its
+    /// model.json's (see `phi rollout --walls`), so that one model can join the table both
+    /// ways under two names. Repeat for several models.
+    #[arg(long = "model-walls", value_name = "NAME=WALLS")]
+    pub model_walls: Vec<String>,
     /// The split to evaluate on: train, valid, test, or another its metadata.json lists.
     #[arg(long, default_value = "test", value_name = "SPLIT", value_parser = crate::cli::parse_split)]
     pub split: String,
@@ -196,6 +202,8 @@ pub struct ModelEntry {
     pub digest: String,
     /// The dataset's bounds for the boundary features (`--bounds data`), or `None`.
     pub bounds: Option<Vec<[f64; 2]>>,
+    /// The walls of its rollouts when `--model-walls` replaces the model's.
+    pub walls: Option<Walls>,
     /// Which of [`Plan`]'s datasets it is evaluated on: 0 for `--data`, k for the k-th
     /// `--model-data`.
     pub data: usize,
@@ -214,11 +222,14 @@ impl ModelEntry {
             let c = self.spec.config.input_velocities;
             return Ok(floor.model::<B>(metadata, c, device)?);
         }
-        let gns = load_model::<B>(&self.dir, device)?;
-        Ok(match &self.bounds {
-            Some(bounds) => gns.with_bounds(bounds.clone())?,
-            None => gns,
-        })
+        let mut gns = load_model::<B>(&self.dir, device)?;
+        if let Some(bounds) = &self.bounds {
+            gns = gns.with_bounds(bounds.clone())?;
+        }
+        if let Some(walls) = self.walls {
+            gns = gns.with_walls(walls);
+        }
+        Ok(gns)
     }
 }
 
@@ -372,6 +383,7 @@ pub fn resolve_model(arg: &str) -> Result<ModelEntry> {
         spec,
         digest,
         bounds: None,
+        walls: None,
         data: 0,
         floor: None,
     })
@@ -393,6 +405,7 @@ fn floor_entry(floor: Floor, metadata: &Metadata, input_velocities: usize) -> Re
         spec: model.spec().clone(),
         digest: format!("floor:{}:{:?}", floor.name(), floor.acceleration(metadata)),
         bounds: None,
+        walls: None,
         data: 0,
         floor: Some((floor, Box::new(metadata.clone()))),
     })
@@ -418,6 +431,7 @@ fn model_digest(dir: &Path) -> Result<String> {
 pub fn plan(args: &EvalArgs) -> Result<Plan> {
     let dataset = Dataset::open(&args.data)?;
     let (mut datasets, model_data) = (vec![dataset], other_datasets(args)?);
+    let model_walls = walls_overrides(args)?;
     let mut models = Vec::with_capacity(args.models.len());
     for arg in &args.models {
         let mut entry = resolve_model(arg)?;
@@ -438,6 +452,10 @@ pub fn plan(args: &EvalArgs) -> Result<Plan> {
             })?;
         if let Some(bounds) = &entry.bounds {
             entry.digest.push_str(&format!(":bounds{bounds:?}"));
+        }
+        if let Some((_, walls)) = model_walls.iter().find(|(name, _)| *name == entry.label) {
+            entry.walls = Some(*walls);
+            entry.digest.push_str(&format!(":walls-{walls:?}"));
         }
         if let Some(other) = models.iter().find(|m: &&ModelEntry| m.label == entry.label) {
             bail!(
@@ -472,6 +490,12 @@ pub fn plan(args: &EvalArgs) -> Result<Plan> {
         .find(|(name, ..)| !models.iter().any(|m| m.label == *name))
     {
         bail!("--model-data {name}=…: no --model is named '{name}'");
+    }
+    if let Some((name, _)) = model_walls
+        .iter()
+        .find(|(name, _)| !models.iter().any(|m| m.label == *name))
+    {
+        bail!("--model-walls {name}=…: no --model is named '{name}'");
     }
     let dataset = &datasets[0];
     let count = crate::cli::split_len(dataset, &args.data, &args.split)?;
@@ -539,6 +563,26 @@ pub fn plan(args: &EvalArgs) -> Result<Plan> {
         options,
         previous: Some(previous),
     })
+}
+
+/// The `--model-walls NAME=WALLS` pairs, each NAME a `--model`'s name, once.
+fn walls_overrides(args: &EvalArgs) -> Result<Vec<(String, Walls)>> {
+    let mut out: Vec<(String, Walls)> = Vec::with_capacity(args.model_walls.len());
+    for arg in &args.model_walls {
+        let Some((name, walls)) = arg.split_once('=') else {
+            bail!("--model-walls {arg}: expected NAME=WALLS, NAME a --model's name");
+        };
+        let walls = match walls {
+            "open" => Walls::Open,
+            "clamp" => Walls::Clamp,
+            other => bail!("--model-walls {arg}: '{other}' is not 'open' or 'clamp'"),
+        };
+        if out.iter().any(|(n, _)| n == name) {
+            bail!("--model-walls {arg}: the model '{name}' has its walls already");
+        }
+        out.push((name.to_string(), walls));
+    }
+    Ok(out)
 }
 
 /// The `--model-data NAME=DATASET` pairs, opened.
