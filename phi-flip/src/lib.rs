@@ -3,6 +3,7 @@
 //! FLIP, PIC, a blend or APIC, and scenes read from TOML files.
 
 mod error;
+pub mod gradient;
 pub mod loss;
 pub mod memory;
 pub mod optimize;
@@ -14,6 +15,7 @@ mod sim;
 mod toml_file;
 
 pub use error::{FlipError, Result};
+pub use gradient::{FlipGradient, HostState};
 pub use loss::Loss;
 pub use memory::MemoryEstimate;
 pub use optimize::{OptimizeConfig, OptimizeError, OptimizeOutcome, OptimizeProblem};
