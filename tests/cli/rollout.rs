@@ -692,3 +692,64 @@ fn a_diverging_model_stops_with_the_frames_before() {
     assert_eq!(record["gif_pictures"], 2);
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn clamped_walls_keep_a_sinking_model_in_the_box() {
+    let dir = scratch("rollout-walls");
+    let data = dir.join("data");
+    tiny_dataset(&data, 2, [0.1, 0.9], Variant::Obstacles);
+    let model = dir.join("model");
+    ok(init(&data, &model, &["--hidden-layers", "0"]));
+    // A decoder bias of −200 standard deviations along the vertical axis: the liquid falls
+    // through the floor (y = 0.1) within the trajectory's four predicted steps.
+    let device = Default::default();
+    let gns = load_model::<NdArray>(&model, &device).unwrap();
+    let params = gns.params().map(|name, t| match name {
+        "decoder.0.bias" => Tensor::from_vec(vec![0.0, -200.0], &t.shape(), &device).unwrap(),
+        _ => t.clone(),
+    });
+    save_model(&model, &gns.with_params(params).unwrap()).unwrap();
+    let liquid_y = |out: &Path| -> Vec<f32> {
+        let arrays = read_npz(out.join("test_0/rollout.npz")).unwrap();
+        let (p, types) = (
+            array(&arrays, "predicted_position"),
+            array(&arrays, "particle_type"),
+        );
+        let (p, types) = (
+            p.as_f32().unwrap().to_vec(),
+            types.as_i64().unwrap().to_vec(),
+        );
+        let n = types.len();
+        p.chunks(2)
+            .enumerate()
+            .filter(|(k, _)| types[k % n] == LIQUID)
+            .map(|(_, xy)| xy[1])
+            .collect()
+    };
+
+    let open = dir.join("open");
+    ok(rollout(&model, &data, &open, &["--frame-every", "0"]));
+    assert!(
+        json(&open.join("test_0/rollout.json"))
+            .get("walls")
+            .is_none()
+    );
+    let y = liquid_y(&open);
+    assert!(
+        y.iter().any(|&y| y < 0.1),
+        "the open rollout stays above the floor: {y:?}"
+    );
+
+    let clamped = dir.join("clamped");
+    ok(rollout(
+        &model,
+        &data,
+        &clamped,
+        &["--frame-every", "0", "--walls", "clamp"],
+    ));
+    assert_eq!(json(&clamped.join("test_0/rollout.json"))["walls"], "clamp");
+    let y = liquid_y(&clamped);
+    assert!(y.iter().all(|&y| y >= 0.1), "below the floor: {y:?}");
+    assert!(y.contains(&0.1f32), "nothing stopped on the floor: {y:?}");
+    let _ = std::fs::remove_dir_all(dir);
+}
