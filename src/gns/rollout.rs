@@ -417,28 +417,7 @@ fn roll_one<B: GnsKernels>(
     record.walls = spec.config.walls;
     // The record first: it marks the folder as ours.
     write_record(dir, &record)?;
-    let mut sinks: Vec<Box<dyn FrameSink>> = Vec::new();
-    if args.vtk_every > 0 {
-        let vtk = RolloutVtk::create(dir, plan.dataset.metadata().dt, &trajectory)?;
-        sinks.push(Box::new(Every::new(args.vtk_every, vtk)));
-    }
-    if args.frame_every > 0 && dim == 2 {
-        let renderer = DatasetRenderer::new(plan.dataset.metadata(), args.pixels_per_cell)?;
-        let gif = RolloutGif::create(&dir.join(GIF_FILE), renderer, &trajectory)?;
-        sinks.push(Box::new(Every::new(args.frame_every, gif)));
-        record.gif = Some(GIF_FILE.to_string());
-    }
-    let first = trajectory.frame(range.start);
-    let start_view = FrameView {
-        frame: range.start,
-        step: 0,
-        positions: first,
-        before: first,
-        truth: Some((first, first)),
-    };
-    for sink in &mut sinks {
-        sink.add(&start_view)?;
-    }
+    let mut sinks = open_sinks(dir, plan, args, &trajectory, &mut record)?;
 
     let bar = progress_bar(range.steps, &rollout_dir_name(&args.split, index));
     let mut predicted: Vec<f32> = Vec::with_capacity(range.steps * n * dim);
@@ -519,6 +498,40 @@ fn roll_one<B: GnsKernels>(
     record.wall_seconds = elapsed;
     write_record(dir, &record)?;
     Ok(record)
+}
+
+/// The frame writers `args` asks for in `dir` (VTK frames, the GIF, which `record` then
+/// names), each given the start frame.
+fn open_sinks(
+    dir: &Path,
+    plan: &Plan,
+    args: &RolloutArgs,
+    trajectory: &Trajectory,
+    record: &mut RolloutRecord,
+) -> Result<Vec<Box<dyn FrameSink>>> {
+    let mut sinks: Vec<Box<dyn FrameSink>> = Vec::new();
+    if args.vtk_every > 0 {
+        let vtk = RolloutVtk::create(dir, plan.dataset.metadata().dt, trajectory)?;
+        sinks.push(Box::new(Every::new(args.vtk_every, vtk)));
+    }
+    if args.frame_every > 0 && trajectory.dim == 2 {
+        let renderer = DatasetRenderer::new(plan.dataset.metadata(), args.pixels_per_cell)?;
+        let gif = RolloutGif::create(&dir.join(GIF_FILE), renderer, trajectory)?;
+        sinks.push(Box::new(Every::new(args.frame_every, gif)));
+        record.gif = Some(GIF_FILE.to_string());
+    }
+    let first = trajectory.frame(plan.range.start);
+    let start_view = FrameView {
+        frame: plan.range.start,
+        step: 0,
+        positions: first,
+        before: first,
+        truth: Some((first, first)),
+    };
+    for sink in &mut sinks {
+        sink.add(&start_view)?;
+    }
+    Ok(sinks)
 }
 
 impl RolloutRecord {

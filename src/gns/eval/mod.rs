@@ -126,7 +126,7 @@ pub struct EvalArgs {
     pub model_data: Vec<String>,
     /// `NAME=WALLS`: roll the model named NAME out with `open` or `clamp` walls instead of its
     /// model.json's (see `phi rollout --walls`), so that one model can join the table both
-    /// ways under two names. Repeat for several models.
+    /// ways under two names; NAME may be a floor of `--floors`. Repeat for several models.
     #[arg(long = "model-walls", value_name = "NAME=WALLS")]
     pub model_walls: Vec<String>,
     /// The split to evaluate on: train, valid, test, or another its metadata.json lists.
@@ -220,7 +220,11 @@ impl ModelEntry {
     pub fn load<B: GnsKernels>(&self, device: &B::Device) -> Result<Gns<B>> {
         if let Some((floor, metadata)) = &self.floor {
             let c = self.spec.config.input_velocities;
-            return Ok(floor.model::<B>(metadata, c, device)?);
+            let gns = floor.model::<B>(metadata, c, device)?;
+            return Ok(match self.walls {
+                Some(walls) => gns.with_walls(walls),
+                None => gns,
+            });
         }
         let mut gns = load_model::<B>(&self.dir, device)?;
         if let Some(bounds) = &self.bounds {
@@ -431,72 +435,7 @@ fn model_digest(dir: &Path) -> Result<String> {
 pub fn plan(args: &EvalArgs) -> Result<Plan> {
     let dataset = Dataset::open(&args.data)?;
     let (mut datasets, model_data) = (vec![dataset], other_datasets(args)?);
-    let model_walls = walls_overrides(args)?;
-    let mut models = Vec::with_capacity(args.models.len());
-    for arg in &args.models {
-        let mut entry = resolve_model(arg)?;
-        if let Some((_, dir, other)) = model_data.iter().find(|(name, ..)| *name == entry.label) {
-            entry.data = datasets.len();
-            entry.digest.push_str(&format!(":data{}", dir.display()));
-            datasets.push(other.clone());
-        }
-        let data = &datasets[entry.data];
-        let metadata_path = data.dir().join(METADATA_FILE);
-        entry.bounds = bounds_for(&entry.spec, data.metadata(), &metadata_path, args.bounds)
-            .with_context(|| {
-                format!(
-                    "--model {arg} ({}) does not fit the dataset {}",
-                    entry.dir.display(),
-                    data.dir().display()
-                )
-            })?;
-        if let Some(bounds) = &entry.bounds {
-            entry.digest.push_str(&format!(":bounds{bounds:?}"));
-        }
-        if let Some((_, walls)) = model_walls.iter().find(|(name, _)| *name == entry.label) {
-            entry.walls = Some(*walls);
-            entry.digest.push_str(&format!(":walls-{walls:?}"));
-        }
-        if let Some(other) = models.iter().find(|m: &&ModelEntry| m.label == entry.label) {
-            bail!(
-                "--model {arg}: the name '{}' is taken by {}; name them: --model NAME=DIR",
-                entry.label,
-                other.dir.display()
-            );
-        }
-        if entry.label.contains(['/', '\\']) || entry.label.starts_with('.') {
-            bail!(
-                "--model {arg}: the name '{}' cannot be a folder name; name it: --model NAME=DIR",
-                entry.label
-            );
-        }
-        models.push(entry);
-    }
-    if args.floors {
-        let c = models[0].spec.config.input_velocities;
-        for floor in Floor::ALL {
-            if let Some(taken) = models.iter().find(|m| m.label == floor.name()) {
-                bail!(
-                    "--floors: the name '{}' is taken by {}; name it otherwise: --model NAME=DIR",
-                    floor.name(),
-                    taken.dir.display()
-                );
-            }
-            models.push(floor_entry(floor, datasets[0].metadata(), c)?);
-        }
-    }
-    if let Some((name, ..)) = model_data
-        .iter()
-        .find(|(name, ..)| !models.iter().any(|m| m.label == *name))
-    {
-        bail!("--model-data {name}=…: no --model is named '{name}'");
-    }
-    if let Some((name, _)) = model_walls
-        .iter()
-        .find(|(name, _)| !models.iter().any(|m| m.label == *name))
-    {
-        bail!("--model-walls {name}=…: no --model is named '{name}'");
-    }
+    let models = resolve_models(args, &mut datasets, &model_data)?;
     let dataset = &datasets[0];
     let count = crate::cli::split_len(dataset, &args.data, &args.split)?;
     for (name, dir, other) in &model_data {
@@ -563,6 +502,88 @@ pub fn plan(args: &EvalArgs) -> Result<Plan> {
         options,
         previous: Some(previous),
     })
+}
+
+/// The `--model`s resolved, each with its dataset (`--model-data`, appended to `datasets`),
+/// bounds and walls, then the floors (`--floors`); names are checked to be distinct and usable
+/// as folder names, and every `--model-data` and `--model-walls` name to be a model's.
+fn resolve_models(
+    args: &EvalArgs,
+    datasets: &mut Vec<Dataset>,
+    model_data: &[(String, PathBuf, Dataset)],
+) -> Result<Vec<ModelEntry>> {
+    let model_walls = walls_overrides(args)?;
+    let mut models = Vec::with_capacity(args.models.len());
+    for arg in &args.models {
+        let mut entry = resolve_model(arg)?;
+        if let Some((_, dir, other)) = model_data.iter().find(|(name, ..)| *name == entry.label) {
+            entry.data = datasets.len();
+            entry.digest.push_str(&format!(":data{}", dir.display()));
+            datasets.push(other.clone());
+        }
+        let data = &datasets[entry.data];
+        let metadata_path = data.dir().join(METADATA_FILE);
+        entry.bounds = bounds_for(&entry.spec, data.metadata(), &metadata_path, args.bounds)
+            .with_context(|| {
+                format!(
+                    "--model {arg} ({}) does not fit the dataset {}",
+                    entry.dir.display(),
+                    data.dir().display()
+                )
+            })?;
+        if let Some(bounds) = &entry.bounds {
+            entry.digest.push_str(&format!(":bounds{bounds:?}"));
+        }
+        if let Some((_, walls)) = model_walls.iter().find(|(name, _)| *name == entry.label) {
+            entry.walls = Some(*walls);
+            entry.digest.push_str(&format!(":walls-{walls:?}"));
+        }
+        if let Some(other) = models.iter().find(|m: &&ModelEntry| m.label == entry.label) {
+            bail!(
+                "--model {arg}: the name '{}' is taken by {}; name them: --model NAME=DIR",
+                entry.label,
+                other.dir.display()
+            );
+        }
+        if entry.label.contains(['/', '\\']) || entry.label.starts_with('.') {
+            bail!(
+                "--model {arg}: the name '{}' cannot be a folder name; name it: --model NAME=DIR",
+                entry.label
+            );
+        }
+        models.push(entry);
+    }
+    if args.floors {
+        let c = models[0].spec.config.input_velocities;
+        for floor in Floor::ALL {
+            if let Some(taken) = models.iter().find(|m| m.label == floor.name()) {
+                bail!(
+                    "--floors: the name '{}' is taken by {}; name it otherwise: --model NAME=DIR",
+                    floor.name(),
+                    taken.dir.display()
+                );
+            }
+            let mut entry = floor_entry(floor, datasets[0].metadata(), c)?;
+            if let Some((_, walls)) = model_walls.iter().find(|(name, _)| *name == entry.label) {
+                entry.walls = Some(*walls);
+                entry.digest.push_str(&format!(":walls-{walls:?}"));
+            }
+            models.push(entry);
+        }
+    }
+    if let Some((name, ..)) = model_data
+        .iter()
+        .find(|(name, ..)| !models.iter().any(|m| m.label == *name))
+    {
+        bail!("--model-data {name}=…: no --model is named '{name}'");
+    }
+    if let Some((name, _)) = model_walls
+        .iter()
+        .find(|(name, _)| !models.iter().any(|m| m.label == *name))
+    {
+        bail!("--model-walls {name}=…: no --model is named '{name}'");
+    }
+    Ok(models)
 }
 
 /// The `--model-walls NAME=WALLS` pairs, each NAME a `--model`'s name, once.
