@@ -55,6 +55,8 @@ pub enum Area {
     General,
     /// `SceneError`.
     Scene,
+    /// `SimulationError`.
+    Simulation,
     /// `DatasetError`.
     Dataset,
     /// `ModelError`.
@@ -116,6 +118,7 @@ impl From<Error> for PyErr {
             Error::Argument { area, .. } => match area {
                 Area::General => PhiError::new_err(message),
                 Area::Scene => SceneError::new_err(message),
+                Area::Simulation => SimulationError::new_err(message),
                 Area::Dataset => DatasetError::new_err(message),
                 Area::Model => ModelError::new_err(message),
                 Area::PointSet => PointSetError::new_err(message),

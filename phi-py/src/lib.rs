@@ -6,13 +6,20 @@
 //! - `Simulation`: a FLIP scene stepped on demand (phi-flip's `SceneRun`);
 //! - `emd`: phi-core's exact earth mover's distance;
 //! - `Dataset`: phi-gns's dataset reader;
-//! - `Model`: a GNS model directory and phi-gns's rollout.
+//! - `Model`: a GNS model directory and phi-gns's rollout;
+//! - `FlipGradient`: a FLIP run as a differentiable function of its initial state (phi-flip's
+//!   `FlipGradient` on Burn), which the Python module `phi_rs.torch` wraps for PyTorch.
+//!
+//! The compiled module is `phi_rs._phi_rs`; the package `phi_rs` (phi-py/python/phi_rs)
+//! re-exports its names and adds the Python-side modules.
 
 mod arrays;
 mod backend;
 mod dataset;
 mod emd;
 mod error;
+#[cfg(feature = "burn")]
+mod gradient;
 mod model;
 mod simulate;
 mod simulation;
@@ -21,7 +28,7 @@ use pyo3::prelude::*;
 
 /// phi from Python: FLIP liquid simulation, GNS datasets and models, point-set distances.
 #[pymodule]
-fn phi_rs(m: &Bound<'_, PyModule>) -> PyResult<()> {
+fn _phi_rs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("BACKENDS", backend::available())?;
@@ -30,6 +37,8 @@ fn phi_rs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<simulation::Simulation>()?;
     m.add_class::<dataset::Dataset>()?;
     m.add_class::<model::Model>()?;
+    #[cfg(feature = "burn")]
+    m.add_class::<gradient::FlipGradient>()?;
     m.add("PhiError", py.get_type::<error::PhiError>())?;
     m.add("SceneError", py.get_type::<error::SceneError>())?;
     m.add("SimulationError", py.get_type::<error::SimulationError>())?;

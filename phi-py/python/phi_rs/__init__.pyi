@@ -126,3 +126,44 @@ class Model:
     ) -> npt.NDArray[np.float32]:
         """Rolls the model out from frame ``start`` (default ``C``) of a ground-truth trajectory
         ``[T, N, d]``; returns the predicted frames ``[steps, N, d]``."""
+
+class FlipGradient:
+    """A FLIP scene's run of ``steps`` steps as a differentiable function of the initial
+    particle positions and velocities, on the Burn (autodiff) backend: ``run`` is the forward
+    map ``(x0, v0) -> (x_T, v_T)``, ``vjp`` its vector-Jacobian product. ``phi_rs.torch`` wraps
+    it as a ``torch.autograd.Function``. ``SceneError`` for a scene that does not build."""
+
+    def __init__(
+        self, scene: Union[str, "os.PathLike[str]"], steps: Optional[int] = None
+    ) -> None:
+        """Builds ``scene`` (a TOML file, or TOML text with a line break) for runs of ``steps``
+        steps (default: the scene's ``simulation.steps``)."""
+    @property
+    def positions(self) -> npt.NDArray[np.float32]:
+        """The scene's seeded initial positions ``[N, d]`` (``simulate``'s frame 0)."""
+    @property
+    def velocities(self) -> npt.NDArray[np.float32]:
+        """The scene's initial velocities ``[N, d]``."""
+    @property
+    def steps(self) -> int: ...
+    @property
+    def dt(self) -> float: ...
+    @property
+    def dim(self) -> int: ...
+    def run(
+        self, positions: npt.ArrayLike, velocities: npt.ArrayLike
+    ) -> Tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+        """The final ``(positions, velocities)`` ``[N_T, d]`` after the steps from the initial
+        state ``[N, d]``. ``SimulationError`` for arrays that are not ``[N, d]`` or a failed
+        step. Releases the GIL."""
+    def vjp(
+        self,
+        positions: npt.ArrayLike,
+        velocities: npt.ArrayLike,
+        grad_positions: npt.ArrayLike,
+        grad_velocities: Optional[npt.ArrayLike] = None,
+    ) -> Tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+        """The gradients ``[N, d]`` with respect to the initial positions and velocities of
+        ``sum(grad_positions * x_T) + sum(grad_velocities * v_T)`` (upstream gradients
+        ``[N_T, d]``; ``None`` for zeros). Runs the steps again, recording them. Releases the
+        GIL."""

@@ -1,0 +1,51 @@
+"""phi from Python: FLIP liquid simulation, GNS datasets and models, point-set distances.
+
+The compiled part is ``phi_rs._phi_rs``; everything is re-exported here. ``phi_rs.torch`` (FLIP
+as a PyTorch operation) is imported on first use and needs PyTorch.
+"""
+
+import importlib
+
+from . import _phi_rs
+from ._phi_rs import (
+    BACKENDS,
+    Dataset,
+    DatasetError,
+    Model,
+    ModelError,
+    PhiError,
+    PointSetError,
+    SceneError,
+    Simulation,
+    SimulationError,
+    __version__,
+    emd,
+    simulate,
+)
+
+__all__ = [
+    "BACKENDS",
+    "Dataset",
+    "DatasetError",
+    "Model",
+    "ModelError",
+    "PhiError",
+    "PointSetError",
+    "SceneError",
+    "Simulation",
+    "SimulationError",
+    "emd",
+    "simulate",
+]
+
+# A build without the Burn backend has no autodiff, so no FlipGradient.
+if hasattr(_phi_rs, "FlipGradient"):
+    FlipGradient = _phi_rs.FlipGradient
+    __all__.append("FlipGradient")
+
+
+def __getattr__(name):
+    # `phi_rs.torch` imports PyTorch, which takes seconds: only when asked for.
+    if name == "torch":
+        return importlib.import_module(".torch", __name__)
+    raise AttributeError(f"module 'phi_rs' has no attribute '{name}'")
