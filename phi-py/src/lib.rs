@@ -36,6 +36,7 @@ fn _phi_rs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(emd::emd, m)?)?;
     m.add_class::<simulation::Simulation>()?;
     m.add_class::<dataset::Dataset>()?;
+    m.add_class::<dataset::Windows>()?;
     m.add_class::<model::Model>()?;
     #[cfg(feature = "burn")]
     m.add_class::<gradient::FlipGradient>()?;

@@ -90,3 +90,61 @@ def test_model_errors(model_dir, dataset_dir, tmp_path):
         model.rollout(positions, types[:-1])
     with pytest.raises(phi_rs.ModelError, match="rollout steps"):
         model.rollout(positions, types, steps=100)
+
+
+def test_len_counts_the_trajectories_of_every_split(dataset_dir):
+    ds = phi_rs.Dataset(dataset_dir)
+    assert len(ds) == sum(ds.len(split) for split in ds.splits) == 2
+
+
+def test_windows_in_order_are_every_slice_of_the_trajectories(dataset_dir):
+    ds = phi_rs.Dataset(dataset_dir)
+    c = 5
+    windows = ds.windows("train", input_velocities=c)
+    frames = ds.metadata["sequence_length"] + 1
+    assert len(windows) == 2 * (frames - c - 1)
+    items = list(windows)
+    assert len(items) == 2 * (frames - c - 1) and len(windows) == 0
+    k = 0
+    for i in range(2):
+        positions, types = ds["train", i]
+        for t in range(c, frames - 1):
+            (window, window_types), target = items[k]
+            assert window.dtype == np.float32 and target.dtype == np.float32
+            assert window.shape == (c + 1, positions.shape[1], 2)
+            assert np.array_equal(window, positions[t - c:t + 1])
+            assert np.array_equal(target, positions[t + 1])
+            assert np.array_equal(window_types, types)
+            k += 1
+
+
+def test_drawn_windows_are_the_trainers_deterministic_batches(dataset_dir):
+    ds = phi_rs.Dataset(dataset_dir)
+    every = list(ds.windows("train", input_velocities=2))
+    drawn = ds.windows("train", input_velocities=2, seed=42, batch_size=3, steps=4)
+    assert len(drawn) == 12
+    items = list(drawn)
+    assert len(items) == 12
+    # Each draw is one of the valid windows, and the same seed draws the same ones.
+    for (window, types), target in items:
+        assert any(np.array_equal(window, w) and np.array_equal(target, y)
+                   for (w, _), y in every)
+    again = list(ds.windows("train", input_velocities=2, seed=42, batch_size=3, steps=4))
+    assert all(np.array_equal(a[1], b[1]) for a, b in zip(items, again))
+    # A resumed run (start_step=2) sees the batches of steps 2 and 3 of an uninterrupted one.
+    resumed = list(ds.windows("train", input_velocities=2, seed=42, batch_size=3,
+                              start_step=2, steps=2))
+    assert all(np.array_equal(a[1], b[1]) for a, b in zip(items[6:], resumed))
+    endless = ds.windows("train", input_velocities=2, seed=1)
+    next(endless)
+    with pytest.raises(TypeError, match="endless"):
+        len(endless)
+
+
+def test_windows_errors(dataset_dir):
+    ds = phi_rs.Dataset(dataset_dir)
+    with pytest.raises(phi_rs.DatasetError, match="valid"):
+        ds.windows("valid")
+    with pytest.raises(phi_rs.DatasetError, match="no window of 15 frames"):
+        ds.windows("train", input_velocities=13)
+

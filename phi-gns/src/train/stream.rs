@@ -153,7 +153,12 @@ impl BatchSource {
         Some(Ok(HostBatch { step, examples }))
     }
 
-    fn example(&mut self, window: WindowRef) -> Result<HostExample, DataError> {
+    /// The example of `window` (one of the sampler's windows), cut from its trajectory: what
+    /// [`BatchSource::batch`] puts in a batch, for a caller that walks the windows itself.
+    ///
+    /// # Errors
+    /// As [`BatchSource::batch`].
+    pub fn example(&mut self, window: WindowRef) -> Result<HostExample, DataError> {
         let trajectory = self.cache.get(window.trajectory)?;
         let spec = self.sampler.spec();
         let first_frame = spec.first_frame(window.frame);

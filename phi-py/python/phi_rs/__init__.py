@@ -18,6 +18,7 @@ from ._phi_rs import (
     SceneError,
     Simulation,
     SimulationError,
+    Windows,
     __version__,
     emd,
     simulate,
@@ -34,6 +35,7 @@ __all__ = [
     "SceneError",
     "Simulation",
     "SimulationError",
+    "Windows",
     "emd",
     "simulate",
 ]

@@ -1,7 +1,7 @@
 """phi from Python: FLIP liquid simulation, GNS datasets and models, point-set distances."""
 
 import os
-from typing import Any, Dict, List, Optional, Tuple, Union
+from typing import Any, Dict, Iterator, List, Optional, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -95,11 +95,38 @@ class Dataset:
     def splits(self) -> List[str]: ...
     def len(self, split: str = "train") -> int:
         """The number of trajectories in ``split``."""
+    def __len__(self) -> int:
+        """``len(ds)``: the number of trajectories in all splits together."""
+    def windows(
+        self,
+        split: str = "train",
+        input_velocities: int = 5,
+        seed: Optional[int] = None,
+        batch_size: int = 2,
+        start_step: int = 0,
+        steps: Optional[int] = None,
+    ) -> "Windows":
+        """The training windows of ``split`` as ``phi train`` cuts them: items
+        ``((window [C+1, N, d] float32, particle_type [N] int64), target [N, d] float32)``,
+        the target being the frame after the window's last. ``seed=None``: every valid window
+        once, in (trajectory, frame) order. A ``seed``: the trainer's draws with that seed,
+        ``batch_size`` per step from ``start_step``, for ``steps`` steps or without end.
+        ``DatasetError`` for an unknown split or trajectories shorter than a window."""
     def __getitem__(
         self, key: Tuple[str, int]
     ) -> Tuple[npt.NDArray[np.float32], npt.NDArray[np.int64]]:
         """``ds[split, i]``: positions float32 ``[frames, N, d]`` and particle types int64
         ``[N]``."""
+
+class Windows(Iterator[Tuple[Tuple[npt.NDArray[np.float32], npt.NDArray[np.int64]], npt.NDArray[np.float32]]]):
+    """An iterator over training windows (``Dataset.windows``); ``len()`` is the number still
+    to come (``TypeError`` for an endless one)."""
+
+    def __iter__(self) -> "Windows": ...
+    def __next__(
+        self,
+    ) -> Tuple[Tuple[npt.NDArray[np.float32], npt.NDArray[np.int64]], npt.NDArray[np.float32]]: ...
+    def __len__(self) -> int: ...
 
 class Model:
     """A GNS model directory (``model.json`` + ``model.safetensors``)."""
