@@ -2,9 +2,13 @@
 
 use std::path::{Path, PathBuf};
 
-use phi_gns::data::Trajectory;
-use phi_gns::model::{Gns, GnsKernels, load_model};
-use phi_gns::rollout::{RolloutRange, rollout_positions};
+use phi_core::Tensor;
+use phi_gns::data::{Trajectory, Variant, read_metadata};
+use phi_gns::model::{
+    Gns, GnsConfig, GnsKernels, GraphBatch, MODEL_FILE, ModelSpec, WEIGHTS_FILE, load_model,
+    save_model,
+};
+use phi_gns::rollout::{Rollout, RolloutRange, input_window, rollout_positions};
 use pyo3::prelude::*;
 
 use crate::arrays::{host_array, shape_text, to_numpy};
@@ -26,7 +30,19 @@ enum Loaded {
 #[pyclass(frozen, module = "phi_rs")]
 pub struct Model {
     inner: Loaded,
-    dir: PathBuf,
+    /// The directory it was loaded from; `None` for a model made by `Model.init`.
+    dir: Option<PathBuf>,
+}
+
+/// Evaluates `$body` with `$m` bound to the `Gns` inside `$loaded`, whatever its backend.
+macro_rules! on_model {
+    ($loaded:expr, $m:ident => $body:expr) => {
+        match $loaded {
+            Loaded::Ndarray($m) => $body,
+            #[cfg(feature = "burn")]
+            Loaded::Burn($m) => $body,
+        }
+    };
 }
 
 /// Loads `dir` on backend `B`.
@@ -48,14 +64,92 @@ fn rollout_on<B: GnsKernels>(
     )?)
 }
 
+/// One step of `model` from `window` (`[N, C + 1, dim]`, the model's layout): the next
+/// positions `[N, dim]`, kinematic particles at `kinematic` (`[N, dim]`).
+fn predict_on<B: GnsKernels>(
+    model: &Gns<B>,
+    window: &[f32],
+    types: &[i64],
+    kinematic: &[f32],
+) -> Result<Vec<f32>, Error> {
+    let device = B::default_device();
+    let spec = model.spec();
+    let batch = GraphBatch::from_host(window, types, spec, &device)?;
+    let kinematic = Tensor::from_slice(kinematic, &[types.len(), spec.config.dim], &device)
+        .map_err(phi_gns::model::ModelError::from)?;
+    let mut stepper = Rollout::new(model, batch)?;
+    stepper.step(&kinematic)?;
+    Ok(stepper.read().to_vec())
+}
+
+/// The configuration `phi model init` makes for a dataset: the thesis' sizes
+/// (`GnsConfig::thesis`), the dataset's `default_connectivity_radius`, boundary features unless
+/// its walls are particles; then the options given.
+#[allow(clippy::too_many_arguments)]
+fn init_config(
+    metadata: &phi_gns::data::Metadata,
+    latent: Option<usize>,
+    hidden: Option<usize>,
+    hidden_layers: Option<usize>,
+    message_passing_steps: Option<usize>,
+    input_velocities: Option<usize>,
+    embedding: Option<usize>,
+    radius: Option<f64>,
+    boundary_features: Option<bool>,
+    noise_std: Option<f64>,
+) -> GnsConfig {
+    let mut config = GnsConfig::thesis(metadata.dim);
+    config.connectivity_radius = metadata.default_connectivity_radius;
+    config.boundary_features = metadata.variant != Variant::WallsAsParticles;
+    let sizes = [
+        (&mut config.latent_size, latent),
+        (&mut config.hidden_size, hidden),
+        (&mut config.hidden_layers, hidden_layers),
+        (&mut config.message_passing_steps, message_passing_steps),
+        (&mut config.input_velocities, input_velocities),
+        (&mut config.embedding_size, embedding),
+    ];
+    for (size, value) in sizes {
+        if let Some(v) = value {
+            *size = v;
+        }
+    }
+    if let Some(r) = radius {
+        config.connectivity_radius = r;
+    }
+    if let Some(b) = boundary_features {
+        config.boundary_features = b;
+    }
+    if let Some(sigma) = noise_std {
+        config.noise_std = sigma;
+    }
+    config
+}
+
+/// The argument of `Model.init` behind a `model.json` key.
+fn init_argument(key: &str) -> Option<&'static str> {
+    Some(match key {
+        "config.latent_size" => "latent",
+        "config.hidden_size" => "hidden",
+        "config.hidden_layers" => "hidden_layers",
+        "config.message_passing_steps" => "message_passing_steps",
+        "config.input_velocities" => "input_velocities",
+        "config.embedding_size" => "embedding",
+        "config.connectivity_radius" => "radius",
+        "config.noise_std" => "noise_std",
+        _ => return None,
+    })
+}
+
+/// A fresh model of `spec` on backend `B`.
+fn init_on<B: GnsKernels>(spec: ModelSpec) -> Result<Gns<B>, Error> {
+    Ok(Gns::<B>::init(spec, &B::default_device())?)
+}
+
 impl Model {
     /// The spec of the loaded model.
     fn spec(&self) -> &phi_gns::model::ModelSpec {
-        match &self.inner {
-            Loaded::Ndarray(m) => m.spec(),
-            #[cfg(feature = "burn")]
-            Loaded::Burn(m) => m.spec(),
-        }
+        on_model!(&self.inner, m => m.spec())
     }
 }
 
@@ -71,12 +165,121 @@ impl Model {
             py,
             move || with_backend!(backend.as_str(), B => load_on::<B>(&path).map(Into::into)),
         )?;
-        Ok(Model { inner, dir })
+        Ok(Model {
+            inner,
+            dir: Some(dir),
+        })
     }
 
-    /// The model's directory.
+    /// A new model for the dataset at ``data`` with seeded random weights, as ``phi model init
+    /// --data DATA`` makes it (the same options and seed give the same weights, bit for bit).
+    /// Sizes default to the thesis' GNS, ``radius`` to the dataset's
+    /// ``default_connectivity_radius``, ``boundary_features`` to on unless the dataset's walls
+    /// are particles. The model lives in memory; ``save(dir)`` writes it.
+    ///
+    /// Raises:
+    ///     DatasetError: ``data`` has no valid ``metadata.json``.
+    ///     ModelError: options that do not make a valid model (naming the argument), a dataset
+    ///         without usable statistics (naming its metadata key).
+    #[staticmethod]
+    #[pyo3(signature = (data, seed = 0, latent = None, hidden = None, hidden_layers = None, message_passing_steps = None, input_velocities = None, embedding = None, radius = None, boundary_features = None, noise_std = None, backend = "ndarray"))]
+    #[allow(clippy::too_many_arguments)]
+    fn init(
+        py: Python<'_>,
+        data: PathBuf,
+        seed: u64,
+        latent: Option<usize>,
+        hidden: Option<usize>,
+        hidden_layers: Option<usize>,
+        message_passing_steps: Option<usize>,
+        input_velocities: Option<usize>,
+        embedding: Option<usize>,
+        radius: Option<f64>,
+        boundary_features: Option<bool>,
+        noise_std: Option<f64>,
+        backend: &str,
+    ) -> PyResult<Model> {
+        let backend = backend.to_string();
+        let inner = detached(py, move || {
+            let metadata = read_metadata(&data)?;
+            let config = init_config(
+                &metadata,
+                latent,
+                hidden,
+                hidden_layers,
+                message_passing_steps,
+                input_velocities,
+                embedding,
+                radius,
+                boundary_features,
+                noise_std,
+            );
+            let mut spec = ModelSpec::for_dataset(&metadata, config, seed);
+            spec.provenance = serde_json::json!({
+                "made_by": "phi_rs.Model.init",
+                "phi_version": env!("CARGO_PKG_VERSION"),
+                "dataset": data.display().to_string(),
+            });
+            if let Err(error) = spec.validate(std::path::Path::new("Model.init")) {
+                if let phi_gns::model::ModelError::Config { key, reason, .. } = &error {
+                    if let Some(argument) = init_argument(key) {
+                        return Err(Error::argument(
+                            Area::Model,
+                            format!("Model.init: {argument}"),
+                            reason.clone(),
+                        ));
+                    }
+                    let metadata_path = data.join(phi_gns::data::METADATA_FILE);
+                    return Err(Error::argument(
+                        Area::Model,
+                        format!("Model.init: '{}': key '{key}'", metadata_path.display()),
+                        reason.clone(),
+                    ));
+                }
+                return Err(error.into());
+            }
+            with_backend!(backend.as_str(), B => init_on::<B>(spec).map(Into::into))
+        })?;
+        Ok(Model { inner, dir: None })
+    }
+
+    /// Writes ``model.json`` and ``model.safetensors`` into ``dir`` (created if missing), the
+    /// files ``Model.load`` reads and ``phi rollout --model`` takes. A directory that already
+    /// holds either file is refused unless ``overwrite``.
+    ///
+    /// Raises:
+    ///     ModelError: the files exist (without ``overwrite``), or cannot be written.
+    #[pyo3(signature = (dir, overwrite = false))]
+    fn save(&self, py: Python<'_>, dir: PathBuf, overwrite: bool) -> PyResult<()> {
+        detached(py, || {
+            for file in [MODEL_FILE, WEIGHTS_FILE] {
+                let path = dir.join(file);
+                if !overwrite && path.exists() {
+                    return Err(Error::argument(
+                        Area::Model,
+                        "Model.save",
+                        format!(
+                            "'{}' exists; pass overwrite=True to replace it",
+                            path.display()
+                        ),
+                    ));
+                }
+            }
+            std::fs::create_dir_all(&dir).map_err(|e| {
+                Error::argument(
+                    Area::Model,
+                    "Model.save",
+                    format!("cannot create '{}': {e}", dir.display()),
+                )
+            })?;
+            on_model!(&self.inner, m => save_model(&dir, m))?;
+            Ok(())
+        })
+    }
+
+    /// The model's directory (``None`` for a model from ``Model.init`` not loaded from disk).
     #[getter]
-    fn dir(&self) -> PathBuf {
+    fn dir(&self) -> Option<PathBuf> {
         self.dir.clone()
     }
 
@@ -109,6 +312,90 @@ impl Model {
             Error::argument(Area::Model, "model.json", format!("cannot be written: {e}"))
         })?;
         py.import("json")?.call_method1("loads", (text,))
+    }
+
+    /// One step of the model: the positions after the window's last frame, as a rollout's
+    /// step computes them (``rollout``'s first frame is ``predict`` of its input window with
+    /// ``kinematic`` the ground truth's next frame).
+    ///
+    /// Args:
+    ///     window: float32 ``[C + 1, N, d]``, the particles' last ``C + 1`` positions, oldest
+    ///         first (``positions[t - C : t + 1]`` of a dataset trajectory), stored units.
+    ///     particle_type: int64 ``[N]`` (0 = obstacle, 1 = liquid).
+    ///     kinematic: float32 ``[N, d]``, where kinematic particles (obstacles) are at the next
+    ///         frame; ``None`` leaves them at the window's last positions.
+    ///
+    /// Returns:
+    ///     float32 ``[N, d]``: the next positions of every particle.
+    ///
+    /// Raises:
+    ///     ModelError: arrays of the wrong shape, a type the model does not know.
+    ///
+    /// The GIL is released while the model runs.
+    #[pyo3(signature = (window, particle_type, kinematic = None))]
+    fn predict<'py>(
+        &self,
+        py: Python<'py>,
+        window: &Bound<'py, PyAny>,
+        particle_type: &Bound<'py, PyAny>,
+        kinematic: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let c = self.input_velocities();
+        let dim = self.dim();
+        let (shape, values) = host_array::<f32>(window, "float32", Area::Model, "predict: window")?;
+        if shape.len() != 3 || shape[0] != c + 1 || shape[2] != dim {
+            return Err(Error::argument(
+                Area::Model,
+                "predict: window",
+                format!(
+                    "shape {}: the model reads [{}, N, {dim}] (C + 1 frames, oldest first)",
+                    shape_text(&shape),
+                    c + 1
+                ),
+            )
+            .into());
+        }
+        let n = shape[1];
+        let (type_shape, types) = host_array::<i64>(
+            particle_type,
+            "int64",
+            Area::Model,
+            "predict: particle_type",
+        )?;
+        if type_shape != [n] {
+            return Err(Error::argument(
+                Area::Model,
+                "predict: particle_type",
+                format!(
+                    "shape {}: expected ({n},), one type per particle of the window",
+                    shape_text(&type_shape)
+                ),
+            )
+            .into());
+        }
+        let kinematic = match kinematic {
+            Some(k) => {
+                let (k_shape, k_values) =
+                    host_array::<f32>(k, "float32", Area::Model, "predict: kinematic")?;
+                if k_shape != [n, dim] {
+                    return Err(Error::argument(
+                        Area::Model,
+                        "predict: kinematic",
+                        format!("shape {}: expected ({n}, {dim})", shape_text(&k_shape)),
+                    )
+                    .into());
+                }
+                k_values
+            }
+            None => values[c * n * dim..].to_vec(),
+        };
+        let next = detached(py, || {
+            let trajectory = Trajectory::new(dim, values, types.clone(), 0, 0)
+                .map_err(|e| Error::argument(Area::Model, "predict: window", e.to_string()))?;
+            let window = input_window(&trajectory, c, c);
+            on_model!(&self.inner, m => predict_on(m, &window, &types, &kinematic))
+        })?;
+        Ok(to_numpy(py, &[n, dim], next)?.into_any())
     }
 
     /// Rolls the model out from frame ``start`` of a ground-truth trajectory, as ``phi
@@ -172,19 +459,18 @@ impl Model {
         let predicted = detached(py, || {
             let trajectory = Trajectory::new(d, values, types, 0, 0)
                 .map_err(|e| Error::argument(Area::Model, "rollout: trajectory", e.to_string()))?;
-            match &self.inner {
-                Loaded::Ndarray(m) => rollout_on(m, &trajectory, range),
-                #[cfg(feature = "burn")]
-                Loaded::Burn(m) => rollout_on(m, &trajectory, range),
-            }
+            on_model!(&self.inner, m => rollout_on(m, &trajectory, range))
         })?;
         Ok(to_numpy(py, &[steps, n, d], predicted)?.into_any())
     }
 
     fn __repr__(&self) -> String {
+        let dir = match &self.dir {
+            Some(dir) => format!("'{}'", dir.display()),
+            None => "None".to_string(),
+        };
         format!(
-            "Model('{}', backend='{}', dim={}, input_velocities={})",
-            self.dir.display(),
+            "Model({dir}, backend='{}', dim={}, input_velocities={})",
             self.backend(),
             self.dim(),
             self.input_velocities()

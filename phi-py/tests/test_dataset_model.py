@@ -148,3 +148,48 @@ def test_windows_errors(dataset_dir):
     with pytest.raises(phi_rs.DatasetError, match="no window of 15 frames"):
         ds.windows("train", input_velocities=13)
 
+
+INIT_OPTIONS = dict(latent=16, hidden=16, hidden_layers=1, message_passing_steps=2,
+                    input_velocities=2, seed=3)
+
+
+def test_model_init_equals_phi_model_init(model_dir, dataset_dir, tmp_path):
+    model = phi_rs.Model.init(dataset_dir, **INIT_OPTIONS)
+    assert model.dir is None
+    cli = phi_rs.Model.load(model_dir)
+    assert model.spec_dict["config"] == cli.spec_dict["config"]
+    assert model.spec_dict["normalisation"] == cli.spec_dict["normalisation"]
+    model.save(tmp_path / "m")
+    assert ((tmp_path / "m" / "model.safetensors").read_bytes()
+            == (model_dir / "model.safetensors").read_bytes())
+    loaded = phi_rs.Model.load(tmp_path / "m")
+    assert loaded.spec_dict["provenance"]["made_by"] == "phi_rs.Model.init"
+    with pytest.raises(phi_rs.ModelError, match="overwrite=True"):
+        model.save(tmp_path / "m")
+    model.save(tmp_path / "m", overwrite=True)
+
+
+def test_model_init_errors(dataset_dir, tmp_path):
+    with pytest.raises(phi_rs.DatasetError, match="no-data"):
+        phi_rs.Model.init(tmp_path / "no-data")
+    with pytest.raises(phi_rs.ModelError, match="Model.init: latent"):
+        phi_rs.Model.init(dataset_dir, latent=0)
+
+
+def test_predict_is_the_first_step_of_rollout(model_dir, dataset_dir, cli_rollout):
+    model = phi_rs.Model.load(model_dir)
+    positions, types = phi_rs.Dataset(dataset_dir)["train", 0]
+    c, start = model.input_velocities, int(cli_rollout["start"][0])
+    window = positions[start - c:start + 1]
+    predicted = model.predict(window, types, kinematic=positions[start + 1])
+    assert predicted.dtype == np.float32 and predicted.shape == positions.shape[1:]
+    assert np.array_equal(predicted, cli_rollout["predicted_position"][0])
+    # Without kinematic positions the obstacles stay where the window leaves them.
+    still = model.predict(window, types)
+    liquid = types == 1
+    assert np.array_equal(still[liquid], predicted[liquid])
+    assert np.array_equal(still[~liquid], positions[start][~liquid])
+    with pytest.raises(phi_rs.ModelError, match=r"window: shape .* the model reads \[3, N, 2\]"):
+        model.predict(positions[:2], types)
+    with pytest.raises(phi_rs.ModelError, match="particle_type"):
+        model.predict(window, types[:-1])

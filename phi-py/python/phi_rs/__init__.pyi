@@ -133,8 +133,31 @@ class Model:
 
     @staticmethod
     def load(dir: Union[str, "os.PathLike[str]"], backend: str = "ndarray") -> "Model": ...
+    @staticmethod
+    def init(
+        data: Union[str, "os.PathLike[str]"],
+        seed: int = 0,
+        latent: Optional[int] = None,
+        hidden: Optional[int] = None,
+        hidden_layers: Optional[int] = None,
+        message_passing_steps: Optional[int] = None,
+        input_velocities: Optional[int] = None,
+        embedding: Optional[int] = None,
+        radius: Optional[float] = None,
+        boundary_features: Optional[bool] = None,
+        noise_std: Optional[float] = None,
+        backend: str = "ndarray",
+    ) -> "Model":
+        """A new model for the dataset at ``data`` with seeded random weights, as ``phi model
+        init`` makes it with the same options (bit for bit). In memory; ``save`` writes it.
+        ``DatasetError`` for a dataset without a valid ``metadata.json``, ``ModelError`` for
+        options that do not make a valid model (naming the argument)."""
+    def save(self, dir: Union[str, "os.PathLike[str]"], overwrite: bool = False) -> None:
+        """Writes ``model.json`` and ``model.safetensors`` into ``dir``; existing files are
+        refused (``ModelError``) unless ``overwrite``."""
     @property
-    def dir(self) -> str: ...
+    def dir(self) -> Optional[str]:
+        """The directory the model was loaded from (``None`` after ``Model.init``)."""
     @property
     def backend(self) -> str: ...
     @property
@@ -144,6 +167,15 @@ class Model:
     @property
     def spec_dict(self) -> Dict[str, Any]:
         """The content of ``model.json``."""
+    def predict(
+        self,
+        window: npt.ArrayLike,
+        particle_type: npt.ArrayLike,
+        kinematic: Optional[npt.ArrayLike] = None,
+    ) -> npt.NDArray[np.float32]:
+        """One step: the positions ``[N, d]`` after a window ``[C+1, N, d]`` (oldest first),
+        as a rollout's step computes them; kinematic particles go to ``kinematic`` ``[N, d]``
+        (default: they stay at the window's last positions)."""
     def rollout(
         self,
         positions: npt.ArrayLike,
