@@ -4,7 +4,8 @@
 //!
 //! - `simulate`: a FLIP scene run as `phi simulate` runs it (phi-flip's `run_scene`);
 //! - `Simulation`: a FLIP scene stepped on demand (phi-flip's `SceneRun`);
-//! - `emd`: phi-core's exact earth mover's distance;
+//! - `emd`: phi-core's exact earth mover's distance; `sinkhorn` and `position_mse`, the
+//!   metrics of `phi eval`;
 //! - `Dataset`: phi-gns's dataset reader;
 //! - `Model`: a GNS model directory and phi-gns's rollout;
 //! - `FlipGradient`: a FLIP run as a differentiable function of its initial state (phi-flip's
@@ -20,6 +21,7 @@ mod emd;
 mod error;
 #[cfg(feature = "burn")]
 mod gradient;
+mod metrics;
 mod model;
 mod simulate;
 mod simulation;
@@ -34,6 +36,8 @@ fn _phi_rs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("BACKENDS", backend::available())?;
     m.add_function(wrap_pyfunction!(simulate::simulate, m)?)?;
     m.add_function(wrap_pyfunction!(emd::emd, m)?)?;
+    m.add_function(wrap_pyfunction!(metrics::sinkhorn, m)?)?;
+    m.add_function(wrap_pyfunction!(metrics::position_mse, m)?)?;
     m.add_class::<simulation::Simulation>()?;
     m.add_class::<dataset::Dataset>()?;
     m.add_class::<dataset::Windows>()?;

@@ -21,7 +21,9 @@ from ._phi_rs import (
     Windows,
     __version__,
     emd,
+    position_mse,
     simulate,
+    sinkhorn,
 )
 
 __all__ = [
@@ -37,7 +39,9 @@ __all__ = [
     "SimulationError",
     "Windows",
     "emd",
+    "position_mse",
     "simulate",
+    "sinkhorn",
 ]
 
 # A build without the Burn backend has no autodiff, so no FlipGradient.

@@ -82,6 +82,31 @@ def emd(a: npt.ArrayLike, b: npt.ArrayLike, cost: str = "sqeuclidean") -> float:
     """The exact earth mover's distance between two ``[N, d]`` point sets: the mean ground cost
     (``"sqeuclidean"`` or ``"euclidean"``) of the optimal one-to-one assignment."""
 
+def sinkhorn(
+    a: npt.ArrayLike,
+    b: npt.ArrayLike,
+    epsilon: float = 1e-4,
+    scaling: float = 0.7,
+    tolerance: Optional[float] = None,
+    max_iterations: int = 1000,
+) -> float:
+    """The debiased Sinkhorn divergence between the uniform measures on ``a`` ``[N, d]`` and
+    ``b`` ``[M, d]``, cost ``½|x − y|²`` (``phi eval``'s): ``S ≥ 0``, ``S(a, a) = 0``, and
+    ``S → ½ emd(a, b)`` as ``epsilon → 0``. Log-domain iterations in float64 with ε-scaling;
+    ``tolerance`` defaults to ``1e-6 · epsilon``. ``PointSetError`` for arrays that are not
+    ``[N, d]``, different ``d``, non-finite values, an ``epsilon`` or ``scaling`` out of
+    range."""
+
+def position_mse(
+    predicted: npt.ArrayLike,
+    truth: npt.ArrayLike,
+    particle_type: Optional[npt.ArrayLike] = None,
+    per_frame: bool = False,
+) -> Union[float, npt.NDArray[np.float64]]:
+    """``phi eval``'s position MSE: per frame of ``[T, N, d]`` (or one ``[N, d]``) arrays, the
+    mean squared difference over the non-kinematic particles (type 0 is kinematic) and the
+    components, in float64; their mean, or with ``per_frame`` the ``[T]`` curve."""
+
 class Dataset:
     """A GNS dataset directory written by ``phi dataset generate``."""
 
