@@ -1,6 +1,7 @@
 //! Files for phi: NumPy `.npy` arrays ([`npy`]), `.npz` archives of them ([`npz`]), object arrays
 //! of numeric arrays as numpy pickles them ([`pickle`]), the atomic
-//! writing they share ([`write_atomic`]), and TOML files read with errors that name the key
+//! writing they share ([`write_atomic`]), the rule every writer applies to its target folder
+//! ([`output_dir::OutputDir`]), and TOML files read with errors that name the key
 //! ([`parse_toml`]).
 //!
 //! Every fallible function returns [`IoError`]; errors about a file name it, and a file that is
@@ -17,6 +18,7 @@ mod atomic;
 mod error;
 pub mod npy;
 pub mod npz;
+pub mod output_dir;
 pub mod pickle;
 mod toml_file;
 
