@@ -17,10 +17,8 @@
 mod common;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use phi::dataset::generate::{GenerateOptions, generate};
-use phi::dataset::manifest::Shard;
-use phi::dataset::{Split, TestScenes};
-use phi_flip::{RandomSceneParams, SceneVariant};
+use phi_dataset::{GenerateOptions, Shard, Split, generate};
+use phi_flip::RandomSceneParams;
 use phi_gns::data::{Metadata, Trajectory, TrajectoryStats, read_trajectory, trajectory_file_name};
 use phi_gns::graph::RadiusGraph;
 use phi_gns::model::{Gns, GnsConfig, GnsKernels, GraphBatch, ModelSpec};
@@ -37,26 +35,18 @@ fn trajectory() -> Trajectory {
         steps: FRAME,
         ..RandomSceneParams::default()
     };
-    generate(&GenerateOptions {
-        out: out.clone(),
+    let options = GenerateOptions {
         splits: vec![Split::Train],
-        count: Some(INDEX + 1),
-        seed: 0,
-        variant: SceneVariant::Obstacles,
+        trajectories: Some(INDEX + 1),
         params,
-        threads: None,
         shard: Shard {
             index: INDEX,
             count: INDEX + 1,
         },
-        resume: false,
-        prune: false,
-        force: false,
-        scenes: TestScenes::builtin(),
-        position_scale: None,
-        progress: false,
-    })
-    .expect("the bench trajectory simulates");
+        ..GenerateOptions::new(&out)
+    };
+    generate(&options, |_| std::ops::ControlFlow::Continue(()))
+        .expect("the bench trajectory simulates");
     let path = out.join("train").join(trajectory_file_name(INDEX));
     let trajectory = read_trajectory(&path).expect("the bench trajectory reads back");
     std::fs::remove_dir_all(&out).ok();

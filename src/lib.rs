@@ -4,7 +4,8 @@
 //! - [`phi_core`]: the [`Backend`] trait and its implementations, [`Tensor`], fields and solvers;
 //! - [`phi_geom`]: geometries and obstacles;
 //! - [`phi_flip`]: the FLIP liquid simulator;
-//! - [`phi_gns`]: Graph Network-based Simulators.
+//! - [`phi_gns`]: Graph Network-based Simulators;
+//! - [`phi_dataset`]: the FLIP datasets they learn from (generation, merging).
 
 pub mod backends;
 pub mod cli;
@@ -19,6 +20,7 @@ pub mod simulate;
 
 pub use phi_core;
 pub use phi_core::{AutodiffBackend, Backend, IntTensor, Tensor, TensorError};
+pub use phi_dataset;
 pub use phi_flip;
 pub use phi_geom;
 pub use phi_gns;

@@ -4,16 +4,14 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
-use phi_flip::{RandomSceneParams, SceneVariant};
+use phi_flip::SceneVariant;
 use phi_gns::data::METADATA_FILE;
 
 use super::export::{EXPORT_OUTPUTS, ExportFormat, ExportOptions, export};
-use super::generate::{GenerateOptions, generate};
 use super::manifest::Shard;
-use super::merge::merge;
+use super::merge;
 use super::render::render_trajectory;
 use super::stats::{StatsOptions, dataset_stats, format_report};
-use super::{Split, TestScenes};
 use crate::output::target::{Marker, OutputSubdir, Outputs, check_dir};
 
 /// `phi dataset <command>`.
@@ -211,7 +209,7 @@ pub struct RenderArgs {
 /// Whatever the command reports.
 pub fn run(command: DatasetCommand) -> Result<()> {
     match command {
-        DatasetCommand::Generate(args) => run_generate(args),
+        DatasetCommand::Generate(args) => super::generate::run(args),
         DatasetCommand::Merge { out, shards, force } => {
             let (out, shards) = merge_paths(out, shards)?;
             let summary = merge(&out, &shards, force)?;
@@ -418,104 +416,6 @@ fn discard_on_error<T>(result: Result<T>, staging: &Path) -> Result<T> {
         let _ = std::fs::remove_dir_all(staging);
     }
     result
-}
-
-fn run_generate(args: GenerateArgs) -> Result<()> {
-    let splits = match args.split {
-        SplitChoice::All => Split::ALL.to_vec(),
-        SplitChoice::Train => vec![Split::Train],
-        SplitChoice::Valid => vec![Split::Valid],
-        SplitChoice::Test => vec![Split::Test],
-    };
-    let mut params = match &args.config {
-        Some(path) => RandomSceneParams::from_file(path)?,
-        None => RandomSceneParams::default(),
-    };
-    if let Some(steps) = args.steps {
-        params.steps = steps;
-        params.validate("--steps")?;
-    }
-    let scenes = match &args.scenes {
-        None => TestScenes::builtin(),
-        Some(dir) => {
-            if splits != [Split::Test] {
-                bail!(
-                    "--scenes {} makes the test split; pass --split test",
-                    dir.display()
-                );
-            }
-            let scenes = TestScenes::from_dir(dir)?;
-            let (resolution, dt) = scenes.domain()?;
-            if let Some(path) = &args.config
-                && (params.resolution != resolution || params.dt != dt)
-            {
-                bail!(
-                    "{}: resolution {:?} and dt {} differ from the scenes of {} ({resolution:?}, \
-                     {dt}); leave them out of the configuration",
-                    path.display(),
-                    params.resolution,
-                    params.dt,
-                    dir.display()
-                );
-            }
-            params.resolution = resolution;
-            params.dt = dt;
-            scenes
-        }
-    };
-    if let Some(scale) = args.position_scale
-        && !(scale.is_finite() && scale > 0.0)
-    {
-        bail!("--position-scale {scale}: the stored units per cell must be a positive number");
-    }
-    let options = GenerateOptions {
-        out: args.out,
-        splits,
-        count: args.trajectories,
-        seed: args.seed,
-        variant: args.variant,
-        params,
-        threads: args.threads,
-        shard: args.shard,
-        resume: args.resume,
-        prune: args.prune,
-        force: args.force,
-        scenes,
-        position_scale: args.position_scale,
-        progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
-    };
-    let summary = generate(&options)?;
-    let mut repaired = String::new();
-    if summary.remade > 0 {
-        repaired.push_str(&format!(
-            ", remade {} damaged or foreign file(s)",
-            summary.remade
-        ));
-    }
-    if summary.stale_removed > 0 {
-        repaired.push_str(&format!(
-            ", removed {} stale temporary file(s)",
-            summary.stale_removed
-        ));
-    }
-    println!(
-        "{}: wrote {} ({}..{} particles), kept {} finished{repaired}, in {:.1} s{}",
-        options.out.display(),
-        trajectories(summary.written),
-        summary.particles.0,
-        summary.particles.1,
-        summary.skipped,
-        summary.seconds,
-        if options.shard.count > 1 {
-            format!(
-                " (shard {}; run `phi dataset merge` when all shards are done)",
-                options.shard
-            )
-        } else {
-            String::new()
-        }
-    );
-    Ok(())
 }
 
 /// Runs `phi render`.

@@ -1,22 +1,21 @@
 //! What a dataset directory records about how it was made: `generator.json` (the manifest that
-//! `phi dataset generate` writes before its first trajectory, so that a resumed or sharded run
-//! can be checked against it) and the `generator` entry of `metadata.json`, which generation
-//! and merging both write.
+//! [`generate`](crate::generate()) writes before its first trajectory, so that a resumed or
+//! sharded run can be checked against it) and the `generator` entry of `metadata.json`, which
+//! generation and merging both write.
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use anyhow::{Context, Result};
 use phi_flip::{RandomSceneParams, SceneVariant};
 use phi_gns::data::{
-    METADATA_FILE, Metadata, TrajectoryStats, Variant, read_trajectory_stats, trajectory_file_name,
-    write_metadata,
+    DataError, METADATA_FILE, Metadata, TrajectoryStats, Variant, read_trajectory_stats,
+    trajectory_file_name, write_metadata,
 };
+use phi_io::output_dir::{Marker, OutputSubdir, Outputs};
 use phi_io::write_atomic;
 use serde::{Deserialize, Serialize};
 
-use super::{Split, TestScenes};
-use crate::output::target::{Marker, OutputSubdir, Outputs};
+use crate::{DatasetError, Result, Split, TestScenes};
 
 /// The name of the generation manifest in a dataset directory.
 pub const MANIFEST: &str = "generator.json";
@@ -197,15 +196,18 @@ pub fn read_manifest(dir: &Path) -> Result<Option<Manifest>> {
     if !path.exists() {
         return Ok(None);
     }
-    let text =
-        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let text = std::fs::read_to_string(&path).map_err(|e| DatasetError::io(&path, "reading", e))?;
     let manifest =
-        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+        serde_json::from_str(&text).map_err(|source| DataError::Json { path, source })?;
     Ok(Some(manifest))
 }
 
-pub(super) fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<()> {
-    let text = serde_json::to_string_pretty(manifest)?;
+/// Writes `DIR/generator.json`, atomically.
+///
+/// # Errors
+/// I/O errors, naming the file.
+pub fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<()> {
+    let text = serde_json::to_string_pretty(manifest).expect("a manifest serialises");
     let path = dir.join(MANIFEST);
     write_atomic::<phi_io::IoError>(&path, |w| phi_io::write_all(w, text.as_bytes(), &path))?;
     Ok(())
@@ -220,10 +222,9 @@ pub fn read_generator(dir: &Path) -> Result<Option<serde_json::Value>> {
     if !path.exists() {
         return Ok(None);
     }
-    let text =
-        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let text = std::fs::read_to_string(&path).map_err(|e| DatasetError::io(&path, "reading", e))?;
     let value: serde_json::Value =
-        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+        serde_json::from_str(&text).map_err(|source| DataError::Json { path, source })?;
     Ok(Some(value.get("generator").cloned().unwrap_or_default()))
 }
 
@@ -246,7 +247,12 @@ pub fn write_dataset_metadata(
     let params = &config.params;
     let mut metadata = Metadata::new(2);
     metadata.sequence_length = params.steps;
-    metadata.dt = params.dt.to_string().parse()?;
+    // In f64 from the shortest decimals of the f32 (0.05, not 0.05000000074505806).
+    metadata.dt = params
+        .dt
+        .to_string()
+        .parse()
+        .unwrap_or(f64::from(params.dt));
     // In f64 from the same decimals as `position_scale` (0.8 / 32 = 0.025, offset 0.1).
     let longest = params.resolution[0].max(params.resolution[1]) as f64;
     let (scale, offset) = (config.position_scale.unwrap_or(0.8 / longest), 0.1);
@@ -277,9 +283,10 @@ pub fn write_dataset_metadata(
         for index in 0..count {
             let path = dir.join(split).join(trajectory_file_name(index));
             let one = read_trajectory_stats(&path)?;
-            stats
-                .merge(&one)
-                .with_context(|| format!("merging the statistics of {}", path.display()))?;
+            stats.merge(&one).map_err(|e| DatasetError::Invalid {
+                path: path.display().to_string(),
+                reason: format!("merging its statistics: {e}"),
+            })?;
         }
     }
     if stats.velocity.count() > 0 {

@@ -1,25 +1,25 @@
-//! `phi dataset merge`: joins shard directories into one dataset, and writes `metadata.json`
-//! (also for unsharded runs of `phi dataset generate`).
+//! Merging: joins the shard directories of a sharded run ([`Shard`]) into one dataset, and
+//! writes its `metadata.json`.
 //!
 //! Trajectory files are hard-linked (copied where the file system cannot link) into the output
 //! directory; the statistics come from the statistics stored in each file, merged in split and
 //! index order, so a merged dataset has the same bytes as an unsharded run of the same
 //! configuration.
 //!
-//! `OUT` must be new or empty; `--force` replaces a dataset that `phi dataset generate` or
-//! `phi dataset merge` wrote there (its files are removed once every source is found). A folder
+//! `out` must be new or empty; `force` replaces a dataset that [`generate`](crate::generate())
+//! or [`merge`] wrote there (its files are removed once every source is found). A folder
 //! holding anything else, or one of the shards itself, is refused.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
 use phi_gns::data::trajectory_file_name;
+use phi_io::output_dir::OutputDir;
 
-use super::manifest::{
-    MANIFEST, MERGE_OUTPUTS, Manifest, Shard, read_manifest, write_dataset_metadata,
+use crate::manifest::{
+    MANIFEST, MERGE_OUTPUTS, Manifest, Shard, read_manifest, write_dataset_metadata, write_manifest,
 };
-use crate::output::target::check_dir;
+use crate::{DatasetError, Result};
 
 /// What a merge did.
 #[derive(Debug, Clone, Default)]
@@ -30,8 +30,8 @@ pub struct MergeSummary {
     pub files: usize,
 }
 
-/// Joins the shard directories `shards` (made by `phi dataset generate --shard k/n` with one
-/// configuration) into the dataset `out`, replacing a dataset there only with `force`
+/// Joins the shard directories `shards` (made by [`generate`](crate::generate()) with one
+/// configuration and shards `k/n`) into the dataset `out`, replacing a dataset there only with `force`
 /// ([`MERGE_OUTPUTS`]).
 ///
 /// # Errors
@@ -40,27 +40,31 @@ pub struct MergeSummary {
 /// errors.
 pub fn merge(out: &Path, shards: &[PathBuf], force: bool) -> Result<MergeSummary> {
     if shards.is_empty() {
-        bail!("give at least one shard directory");
+        return Err(DatasetError::Options(
+            "give at least one shard directory".into(),
+        ));
     }
     if let Ok(target) = out.canonicalize()
         && let Some(shard) = shards
             .iter()
             .find(|s| s.canonicalize().is_ok_and(|s| s == target))
     {
-        bail!(
-            "OUT {} is the shard {}; merge into a new directory",
-            out.display(),
-            shard.display()
-        );
+        return Err(DatasetError::Directory {
+            path: out.to_path_buf(),
+            reason: format!(
+                "is the shard {}; merge into a new directory",
+                shard.display()
+            ),
+        });
     }
-    let previous = check_dir(out, &MERGE_OUTPUTS, force)?;
+    let mut previous = OutputDir::claim(out, &MERGE_OUTPUTS, force)?;
     let mut manifests = Vec::new();
     for dir in shards {
-        let manifest = read_manifest(dir)?.with_context(|| {
-            format!(
-                "{} has no {MANIFEST}: it is not a directory written by `phi dataset generate`",
-                dir.display()
-            )
+        let manifest = read_manifest(dir)?.ok_or_else(|| DatasetError::Directory {
+            path: dir.clone(),
+            reason: format!(
+                "has no {MANIFEST}: it is not a directory written by `phi dataset generate`"
+            ),
         })?;
         manifests.push(manifest);
     }
@@ -69,12 +73,14 @@ pub fn merge(out: &Path, shards: &[PathBuf], force: bool) -> Result<MergeSummary
     for (dir, m) in shards.iter().zip(&manifests).skip(1) {
         let differences = m.config.differences(&reference);
         if !differences.is_empty() {
-            bail!(
-                "{} was generated with another configuration than {} (differing keys: {})",
-                dir.display(),
-                shards[0].display(),
-                differences.join(", ")
-            );
+            return Err(DatasetError::Directory {
+                path: dir.clone(),
+                reason: format!(
+                    "was generated with another configuration than {} (differing keys: {})",
+                    shards[0].display(),
+                    differences.join(", ")
+                ),
+            });
         }
     }
     let mut counts: BTreeMap<String, usize> = BTreeMap::new();
@@ -94,18 +100,18 @@ pub fn merge(out: &Path, shards: &[PathBuf], force: bool) -> Result<MergeSummary
                 .iter()
                 .map(|s| s.join(split).join(&name))
                 .find(|p| p.is_file())
-                .with_context(|| {
-                    format!(
+                .ok_or_else(|| {
+                    DatasetError::Options(format!(
                         "no shard holds {split}/{name}: run the missing shard (or resume it) first"
-                    )
+                    ))
                 })?;
             pairs.push((source, out.join(split).join(&name)));
         }
     }
-    previous.remove()?;
+    previous.clear_previous()?;
     for split in counts.keys() {
         let dir = out.join(split);
-        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        std::fs::create_dir_all(&dir).map_err(|e| DatasetError::io(&dir, "creating", e))?;
     }
     for (source, target) in &pairs {
         link_or_copy(source, target)?;
@@ -119,11 +125,7 @@ pub fn merge(out: &Path, shards: &[PathBuf], force: bool) -> Result<MergeSummary
         shard: Shard::default(),
         counts: counts.clone(),
     };
-    let text = serde_json::to_string_pretty(&manifest)?;
-    let path = out.join(MANIFEST);
-    phi_io::write_atomic::<phi_io::IoError>(&path, |w| {
-        phi_io::write_all(w, text.as_bytes(), &path)
-    })?;
+    write_manifest(out, &manifest)?;
     write_dataset_metadata(out, &config, &counts, Shard::default())?;
     Ok(summary)
 }
@@ -138,8 +140,7 @@ fn link_or_copy(source: &Path, target: &Path) -> Result<()> {
     name.push(target.file_name().unwrap_or_default());
     name.push(format!(".tmp-{}", std::process::id()));
     let temp = target.with_file_name(name);
-    std::fs::copy(source, &temp)
-        .with_context(|| format!("copying {} to {}", source.display(), temp.display()))?;
-    std::fs::rename(&temp, target).with_context(|| format!("renaming {}", temp.display()))?;
+    std::fs::copy(source, &temp).map_err(|e| DatasetError::io(source, "copying", e))?;
+    std::fs::rename(&temp, target).map_err(|e| DatasetError::io(&temp, "renaming", e))?;
     Ok(())
 }
