@@ -43,6 +43,12 @@ create_exception!(
 );
 create_exception!(
     phi_rs,
+    TrainingError,
+    PhiError,
+    "A training run that cannot start or go on: a preset, an output directory, a diverged step."
+);
+create_exception!(
+    phi_rs,
     PointSetError,
     PhiError,
     "Point sets that a distance cannot compare (shapes, counts, non-finite values)."
@@ -63,6 +69,8 @@ pub enum Area {
     Model,
     /// `PointSetError`.
     PointSet,
+    /// `TrainingError`.
+    Training,
 }
 
 /// What a call of the module can fail with.
@@ -77,6 +85,9 @@ pub enum Error {
     /// The GNS model's errors.
     #[error(transparent)]
     Model(#[from] phi_gns::model::ModelError),
+    /// The trainer's errors.
+    #[error(transparent)]
+    Train(#[from] phi_gns::train::TrainError),
     /// The point-set distances' errors.
     #[error(transparent)]
     PointSet(#[from] phi_core::point_sets::PointSetError),
@@ -114,6 +125,9 @@ impl From<Error> for PyErr {
             Error::Flip(_) => SimulationError::new_err(message),
             Error::Data(_) => DatasetError::new_err(message),
             Error::Model(_) => ModelError::new_err(message),
+            Error::Train(phi_gns::train::TrainError::Data(_)) => DatasetError::new_err(message),
+            Error::Train(phi_gns::train::TrainError::Model(_)) => ModelError::new_err(message),
+            Error::Train(_) => TrainingError::new_err(message),
             Error::PointSet(_) => PointSetError::new_err(message),
             Error::Argument { area, .. } => match area {
                 Area::General => PhiError::new_err(message),
@@ -122,6 +136,7 @@ impl From<Error> for PyErr {
                 Area::Dataset => DatasetError::new_err(message),
                 Area::Model => ModelError::new_err(message),
                 Area::PointSet => PointSetError::new_err(message),
+                Area::Training => TrainingError::new_err(message),
             },
             Error::Panic(_) => PhiError::new_err(message),
         }

@@ -7,7 +7,8 @@
 //! - `emd`: phi-core's exact earth mover's distance; `sinkhorn` and `position_mse`, the
 //!   metrics of `phi eval`;
 //! - `Dataset`: phi-gns's dataset reader;
-//! - `Model`: a GNS model directory and phi-gns's rollout;
+//! - `Model`: a GNS model (loaded or initialised), phi-gns's one step and rollout;
+//! - `train`: phi-gns's `TrainingRun`, as `phi train` runs it;
 //! - `FlipGradient`: a FLIP run as a differentiable function of its initial state (phi-flip's
 //!   `FlipGradient` on Burn), which the Python module `phi_rs.torch` wraps for PyTorch.
 //!
@@ -25,6 +26,8 @@ mod metrics;
 mod model;
 mod simulate;
 mod simulation;
+#[cfg(feature = "burn")]
+mod train;
 
 use pyo3::prelude::*;
 
@@ -44,11 +47,14 @@ fn _phi_rs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<model::Model>()?;
     #[cfg(feature = "burn")]
     m.add_class::<gradient::FlipGradient>()?;
+    #[cfg(feature = "burn")]
+    m.add_function(wrap_pyfunction!(train::train, m)?)?;
     m.add("PhiError", py.get_type::<error::PhiError>())?;
     m.add("SceneError", py.get_type::<error::SceneError>())?;
     m.add("SimulationError", py.get_type::<error::SimulationError>())?;
     m.add("DatasetError", py.get_type::<error::DatasetError>())?;
     m.add("ModelError", py.get_type::<error::ModelError>())?;
     m.add("PointSetError", py.get_type::<error::PointSetError>())?;
+    m.add("TrainingError", py.get_type::<error::TrainingError>())?;
     Ok(())
 }

@@ -18,6 +18,7 @@ from ._phi_rs import (
     SceneError,
     Simulation,
     SimulationError,
+    TrainingError,
     Windows,
     __version__,
     emd,
@@ -37,6 +38,7 @@ __all__ = [
     "SceneError",
     "Simulation",
     "SimulationError",
+    "TrainingError",
     "Windows",
     "emd",
     "position_mse",
@@ -44,10 +46,11 @@ __all__ = [
     "sinkhorn",
 ]
 
-# A build without the Burn backend has no autodiff, so no FlipGradient.
+# A build without the Burn backend has no autodiff: no FlipGradient, no train.
 if hasattr(_phi_rs, "FlipGradient"):
     FlipGradient = _phi_rs.FlipGradient
-    __all__.append("FlipGradient")
+    train = _phi_rs.train
+    __all__ += ["FlipGradient", "train"]
 
 
 def __getattr__(name):

@@ -1,7 +1,7 @@
 """phi from Python: FLIP liquid simulation, GNS datasets and models, point-set distances."""
 
 import os
-from typing import Any, Dict, Iterator, List, Optional, Tuple, Union
+from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -24,6 +24,10 @@ class DatasetError(PhiError):
 
 class ModelError(PhiError):
     """A model directory that cannot be loaded, or input that does not fit the model."""
+
+class TrainingError(PhiError):
+    """A training run that cannot start or go on: a preset, an output directory, a diverged
+    step."""
 
 class PointSetError(PhiError):
     """Point sets that a distance cannot compare."""
@@ -210,6 +214,31 @@ class Model:
     ) -> npt.NDArray[np.float32]:
         """Rolls the model out from frame ``start`` (default ``C``) of a ground-truth trajectory
         ``[T, N, d]``; returns the predicted frames ``[steps, N, d]``."""
+
+def train(
+    out: Union[str, "os.PathLike[str]"],
+    data: Optional[Union[str, "os.PathLike[str]"]] = None,
+    config: Optional[Union[str, "os.PathLike[str]"]] = None,
+    steps: Optional[int] = None,
+    resume: bool = False,
+    init_from: Optional[Union[str, "os.PathLike[str]"]] = None,
+    batch_size: Optional[int] = None,
+    seed: Optional[int] = None,
+    noise_std: Optional[float] = None,
+    extra_steps: Optional[int] = None,
+    log_every: Optional[int] = None,
+    checkpoint_every: Optional[int] = None,
+    screen_every: Optional[int] = None,
+    ema_decay: Optional[float] = None,
+    progress: Optional[Callable[[int, int, float, float], Any]] = None,
+) -> Dict[str, Any]:
+    """Trains a GNS as ``phi train --backend burn`` does (the same curve and weights), into the
+    training directory ``out``; ``resume`` continues from its newest checkpoint. The options
+    override the preset's as ``phi train``'s do. ``progress(step, total, loss, learning_rate)``
+    is called after every step; an exception from it (or Ctrl-C) stops the run after a
+    checkpoint. Returns ``{"step", "loss", "best", "out"}``. ``TrainingError`` for a preset,
+    directory or resume that does not work (naming the key), ``DatasetError``/``ModelError``
+    for data or models that do not load or fit. Releases the GIL during each step."""
 
 class FlipGradient:
     """A FLIP scene's run of ``steps`` steps as a differentiable function of the initial

@@ -1,0 +1,220 @@
+//! `phi_rs.train`: a GNS trained as `phi train` trains it (phi-gns's `TrainingRun`), with its
+//! files, checkpoints and resume, on the Burn (autodiff) backend.
+
+use std::path::PathBuf;
+
+use phi_core::Backend;
+use phi_core::backend::burn::Burn;
+use phi_gns::train::TrainConfig;
+use phi_gns::train::run::{CONFIG_FILE, RunOptions, TrainRecord, TrainingRun};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::error::{Area, Error, detached};
+
+/// The backend that trains: Burn on the CPU, the one of this build with autodiff.
+type Autodiff = Burn;
+
+/// The overrides of `phi train`'s options, applied to a preset.
+struct Overrides {
+    steps: Option<u64>,
+    batch_size: Option<usize>,
+    seed: Option<u64>,
+    noise_std: Option<f64>,
+    extra_steps: Option<usize>,
+    log_every: Option<u64>,
+    checkpoint_every: Option<u64>,
+    screen_every: Option<u64>,
+    ema_decay: Option<f64>,
+}
+
+/// The configuration, dataset and preset name of a run, as `phi train` resolves its options:
+/// a new run needs `config` and `data`; `resume` reads the run's own `config.toml` and dataset
+/// unless they are given.
+fn resolve(
+    out: &std::path::Path,
+    data: Option<PathBuf>,
+    config: Option<PathBuf>,
+    resume: bool,
+    overrides: &Overrides,
+) -> Result<(TrainConfig, PathBuf, String), Error> {
+    let (preset, stored_data) = if resume {
+        let record = TrainRecord::read(out)?;
+        (
+            config.unwrap_or_else(|| out.join(CONFIG_FILE)),
+            Some(record.dataset),
+        )
+    } else {
+        let Some(config) = config else {
+            return Err(Error::argument(
+                Area::Training,
+                "train: config",
+                "a preset is needed for a new run (e.g. configs/gns/cpu/1sn.toml)",
+            ));
+        };
+        (config, None)
+    };
+    let mut c = TrainConfig::from_file(&preset)?;
+    let t = &mut c.training;
+    let o = overrides;
+    if let Some(v) = o.steps {
+        t.steps = v;
+    }
+    if let Some(v) = o.batch_size {
+        t.batch_size = v;
+    }
+    if let Some(v) = o.seed {
+        t.seed = v;
+    }
+    if let Some(v) = o.extra_steps {
+        t.extra_steps = v;
+    }
+    if let Some(v) = o.log_every {
+        t.log_every = v;
+    }
+    if let Some(v) = o.ema_decay {
+        t.ema_decay = Some(v);
+    }
+    if let Some(v) = o.noise_std {
+        c.model.noise_std = v;
+    }
+    if let Some(v) = o.checkpoint_every {
+        c.checkpoints.every = v;
+    }
+    if let Some(v) = o.screen_every {
+        c.screening.every = v;
+    }
+    c.validate(&format!(
+        "{} (with the arguments' overrides)",
+        preset.display()
+    ))?;
+    let data = match (data, stored_data) {
+        (Some(data), _) => data,
+        (None, Some(stored)) => stored,
+        (None, None) => {
+            return Err(Error::argument(
+                Area::Training,
+                "train: data",
+                "a dataset is needed for a new run",
+            ));
+        }
+    };
+    Ok((c, data, preset.display().to_string()))
+}
+
+/// Trains a GNS as ``phi train`` does, into the training directory ``out`` (``train.json``,
+/// ``config.toml``, ``train.csv``, ``checkpoints/``, ``best/``), on the Burn backend. The same
+/// preset, options and seed give the same loss curve and weights as ``phi train --backend burn``
+/// (same thread count), and a run resumed from a checkpoint continues as an uninterrupted one.
+///
+/// Args:
+///     out: the training directory (new or empty; with ``resume`` the run's own).
+///     data: the dataset (with ``resume``: the run's, by default).
+///     config: the preset TOML (``configs/gns/*.toml``; with ``resume``: the run's
+///         ``config.toml``, by default).
+///     steps: the total number of steps (overrides ``training.steps``).
+///     resume: continue from the newest checkpoint in ``out``.
+///     init_from: a model directory whose weights the run starts from.
+///     batch_size, seed, noise_std, extra_steps, log_every, checkpoint_every, screen_every,
+///         ema_decay: override the preset's values, as ``phi train``'s options do.
+///     progress: called after every step as ``progress(step, total, loss, learning_rate)``;
+///         an exception it raises stops the run after a checkpoint and is raised again.
+///
+/// Returns:
+///     A dict: ``step`` (the steps done), ``loss`` (the last step's), ``best`` (``{"value",
+///     "step"}`` of the best screening, or ``None``) and ``out``.
+///
+/// Raises:
+///     TrainingError: a preset or override that is not valid (naming the key), an output
+///         directory that holds something else, a resume without a checkpoint, a diverged run.
+///     DatasetError, ModelError: a dataset or model that does not load or fit.
+///     KeyboardInterrupt: Ctrl-C, after the checkpoint of the last completed step.
+///
+/// The GIL is released during each step.
+#[pyfunction]
+#[pyo3(signature = (out, data = None, config = None, steps = None, resume = false, init_from = None, batch_size = None, seed = None, noise_std = None, extra_steps = None, log_every = None, checkpoint_every = None, screen_every = None, ema_decay = None, progress = None))]
+#[allow(clippy::too_many_arguments)] // Python's keyword arguments
+pub fn train<'py>(
+    py: Python<'py>,
+    out: PathBuf,
+    data: Option<PathBuf>,
+    config: Option<PathBuf>,
+    steps: Option<u64>,
+    resume: bool,
+    init_from: Option<PathBuf>,
+    batch_size: Option<usize>,
+    seed: Option<u64>,
+    noise_std: Option<f64>,
+    extra_steps: Option<usize>,
+    log_every: Option<u64>,
+    checkpoint_every: Option<u64>,
+    screen_every: Option<u64>,
+    ema_decay: Option<f64>,
+    progress: Option<Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    if resume && init_from.is_some() {
+        return Err(Error::argument(
+            Area::Training,
+            "train: init_from",
+            "a resumed run continues from its checkpoint; init_from is for a new run",
+        )
+        .into());
+    }
+    let overrides = Overrides {
+        steps,
+        batch_size,
+        seed,
+        noise_std,
+        extra_steps,
+        log_every,
+        checkpoint_every,
+        screen_every,
+        ema_decay,
+    };
+    let target = out.clone();
+    let mut run = detached(py, move || {
+        let (config, data, preset) = resolve(&target, data, config, resume, &overrides)?;
+        let options = RunOptions {
+            out: target,
+            data,
+            config,
+            preset,
+            init_from,
+            resume,
+        };
+        Ok(TrainingRun::<Autodiff>::open(
+            &options,
+            &Autodiff::default_device(),
+        )?)
+    })?;
+    let total = run.config().training.steps;
+    let mut loss = None;
+    while run.step() < total {
+        let report = detached(py, || Ok(run.train_step()?))?;
+        loss = Some(report.loss);
+        let stopped = match &progress {
+            Some(callback) => callback
+                .call1((report.step, total, report.loss, report.learning_rate))
+                .err(),
+            None => None,
+        };
+        if let Some(error) = stopped.or_else(|| py.check_signals().err()) {
+            detached(py, || Ok(run.checkpoint()?))?;
+            return Err(error);
+        }
+    }
+    let result = PyDict::new(py);
+    result.set_item("step", run.step())?;
+    result.set_item("loss", loss)?;
+    match run.best() {
+        Some(best) => {
+            let b = PyDict::new(py);
+            b.set_item("value", best.value)?;
+            b.set_item("step", best.step)?;
+            result.set_item("best", b)?;
+        }
+        None => result.set_item("best", py.None())?,
+    }
+    result.set_item("out", out)?;
+    Ok(result)
+}
