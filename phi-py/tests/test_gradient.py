@@ -103,3 +103,21 @@ def test_flip_gradient_errors():
         flip.vjp(x0, v0, x0[:-1])
     with pytest.raises(phi_rs.SimulationError, match="not an array of float32"):
         flip.run("not an array", v0)
+
+
+def test_phi_rs_torch_without_pytorch_says_what_is_missing():
+    # A fresh interpreter in which `import torch` fails: the package imports, and asking for
+    # phi_rs.torch raises an ImportError that says PyTorch is needed.
+    import subprocess
+    import sys
+    code = (
+        "import sys; sys.modules['torch'] = None\n"
+        "import phi_rs\n"
+        "try:\n"
+        "    phi_rs.torch\n"
+        "except ImportError as e:\n"
+        "    print(e)\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            check=True)
+    assert "phi_rs.torch needs PyTorch" in result.stdout
