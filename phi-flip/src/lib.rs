@@ -13,6 +13,7 @@ mod scene;
 mod seed;
 mod sim;
 mod toml_file;
+pub mod totals;
 
 pub use error::{FlipError, Result};
 pub use gradient::{FlipGradient, HostState};
@@ -33,3 +34,4 @@ pub use sim::{
     DEFAULT_MAX_CFL, DEFAULT_MAX_SUBSTEPS, FlipParams, FlipSimulation, Inflow, Particles,
     SceneParameters, StepStats,
 };
+pub use totals::RunTotals;

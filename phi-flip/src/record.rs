@@ -112,6 +112,12 @@ impl Recording {
         self.frames.push(RecordedFrame::of(particles, self.apic));
     }
 
+    /// Appends a state already on the host (a frame of another recording, or one a caller
+    /// read back itself).
+    pub fn push_frame(&mut self, frame: RecordedFrame) {
+        self.frames.push(frame);
+    }
+
     /// The recorded frames, frame 0 first.
     pub fn frames(&self) -> &[RecordedFrame] {
         &self.frames
