@@ -27,16 +27,17 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use phi_core::AutodiffBackend;
+use phi_core::fields::Domain;
 use phi_core::fields::LatticeKernels;
 use phi_core::point_sets::set_distances;
 use phi_flip::optimize::{Forward, IterationRecord, LossSpec};
-use phi_flip::{OptimizeConfig, OptimizeProblem};
+use phi_flip::{OptimizeConfig, OptimizeOutcome, OptimizeProblem};
 use phi_gns::model::GnsKernels;
+use phi_io::output_dir::{OutputDir, OutputSubdir, Outputs};
 use phi_plot::{LinePlot, Series};
 use serde::Serialize;
 
 use crate::gns::inverse::GnsForward;
-use crate::output::target::{OutputSubdir, Outputs, check_dir};
 use crate::output::{FrameStyle, KIND_LIQUID, OutputError, render_frame, write_atomic, write_png};
 
 /// `phi optimize CONFIG.toml --out DIR [--backend burn|tch] [--iterations N] [--loss L]`.
@@ -124,7 +125,7 @@ pub fn run(args: OptimizeArgs) -> Result<()> {
             .context("no backend with autodiff is compiled into this build")?,
     };
     // Refused before the configuration is built; a previous run is removed in `optimize`.
-    let _previous = check_dir(&args.out, &OPTIMIZE_OUTPUTS, args.force)?;
+    let _previous = OutputDir::claim(&args.out, &OPTIMIZE_OUTPUTS, args.force)?;
     let options = OptimizeOptions {
         config: args.config.clone(),
         out: args.out.clone(),
@@ -272,8 +273,7 @@ pub fn optimize<B: AutodiffBackend + LatticeKernels + GnsKernels>(
         config.optimize.loss = loss;
     }
     let origin = options.config.display().to_string();
-    let device = B::default_device();
-    let problem: OptimizeProblem<B> = config.build(&origin, &device)?;
+    let problem: OptimizeProblem<B> = config.build(&origin, &B::default_device())?;
     let gns = match &options.model {
         Some(dir) => Some(GnsForward::new(dir, &problem, &origin)?),
         None => None,
@@ -282,43 +282,11 @@ pub fn optimize<B: AutodiffBackend + LatticeKernels + GnsKernels>(
         Some(gns) => gns,
         None => &problem,
     };
-    let out = &options.out;
     // Checked again here, once the configuration has been built: the previous run goes only
     // when this one is about to write.
-    check_dir(out, &OPTIMIZE_OUTPUTS, options.force)?.remove()?;
-    let frames = out.join("frames");
-    std::fs::create_dir_all(&frames).with_context(|| format!("creating {}", frames.display()))?;
-
-    let sim = &problem.simulation;
-    let domain = sim.domain().clone();
-    let d = domain.dim();
-    let solid = sim.solid_cells(0.0)?;
-    let style = FrameStyle {
-        pixels_per_cell: options.pixels_per_cell.max(1),
-        ..FrameStyle::default()
-    };
-    let target = problem.target.to_vec();
-    let target_initial = problem.target_initial.to_vec();
-    let draw = |liquid: &[f32], under: &[f32], path: &Path| -> Result<()> {
-        let mut positions = under.to_vec();
-        positions.extend_from_slice(liquid);
-        let mut kinds = vec![KIND_TARGET; under.len() / d];
-        kinds.extend(std::iter::repeat_n(KIND_LIQUID, liquid.len() / d));
-        let image = render_frame(
-            &positions,
-            d,
-            &kinds,
-            domain.lower(),
-            domain.upper(),
-            domain.resolution(),
-            Some(&solid),
-            &style,
-        )?;
-        write_png(path, &image)?;
-        Ok(())
-    };
-    let iterations = problem.iterations;
-    let frame_every = options.frame_every.max(1);
+    let mut dir = OutputDir::claim(&options.out, &OPTIMIZE_OUTPUTS, options.force)?;
+    dir.clear_previous()?;
+    let frames = IterationFrames::new(&problem, options)?;
     let started = Instant::now();
     let mut draw_error = None;
     let outcome = problem.run_through(forward, |record: &IterationRecord| {
@@ -328,45 +296,138 @@ pub fn optimize<B: AutodiffBackend + LatticeKernels + GnsKernels>(
                 record.iteration, record.loss, record.gradient_norm, record.chamfer
             );
         }
-        let k = record.iteration;
-        if k == 0 || k == iterations || k.is_multiple_of(frame_every) {
-            let name = |what: &str| frames.join(format!("iteration_{k:03}_{what}.png"));
-            let result = draw(&record.initial_positions, &target_initial, &name("initial"))
-                .and_then(|()| draw(&record.final_positions, &target, &name("final")));
-            if let Err(e) = result {
-                draw_error.get_or_insert(e);
-            }
+        if frames.due(record.iteration)
+            && let Err(e) = frames.draw(record)
+        {
+            draw_error.get_or_insert(e);
         }
     });
     let elapsed = started.elapsed().as_secs_f64();
     if let Some(e) = draw_error {
         return Err(e);
     }
-    let records = &outcome.records;
     // Always a frame of the last good state (an early stop may fall between frame iterations).
-    if let Some(last) = records.last() {
-        let k = last.iteration;
-        draw(
-            &last.initial_positions,
-            &target_initial,
-            &frames.join(format!("iteration_{k:03}_initial.png")),
-        )?;
-        draw(
-            &last.final_positions,
-            &target,
-            &frames.join(format!("iteration_{k:03}_final.png")),
-        )?;
+    if let Some(last) = outcome.records.last() {
+        frames.draw(last)?;
     }
-    write_loss_csv(&out.join("loss.csv"), records)?;
+    write_loss_files(&dir, &outcome.records)?;
+    let summary = summarize(&problem, gns.as_ref(), &outcome, elapsed, &origin)?;
+    let json = serde_json::json!({ "config": config, "summary": summary });
+    dir.write_bytes("summary.json", &serde_json::to_vec_pretty(&json)?)?;
+    if let Some(e) = outcome.stopped {
+        bail!(
+            "{origin}: {e}; the outputs of the last good iteration ({}) are in {}",
+            outcome.records.last().map_or(0, |r| r.iteration),
+            dir.path().display()
+        );
+    }
+    Ok(summary)
+}
+
+/// `frames/iteration_KKK_{initial,final}.png`: the initial positions over the target's, and
+/// the simulated positions over the target, of the first, every `frame_every`-th and the last
+/// iteration.
+struct IterationFrames {
+    frames: PathBuf,
+    domain: Domain,
+    solid: Vec<bool>,
+    style: FrameStyle,
+    target: Vec<f32>,
+    target_initial: Vec<f32>,
+    iterations: usize,
+    every: usize,
+}
+
+impl IterationFrames {
+    fn new<B: LatticeKernels>(
+        problem: &OptimizeProblem<B>,
+        options: &OptimizeOptions,
+    ) -> Result<Self> {
+        let frames = options.out.join("frames");
+        std::fs::create_dir_all(&frames)
+            .with_context(|| format!("creating {}", frames.display()))?;
+        let sim = &problem.simulation;
+        Ok(IterationFrames {
+            frames,
+            domain: sim.domain().clone(),
+            solid: sim.solid_cells(0.0)?,
+            style: FrameStyle {
+                pixels_per_cell: options.pixels_per_cell.max(1),
+                ..FrameStyle::default()
+            },
+            target: problem.target.to_vec(),
+            target_initial: problem.target_initial.to_vec(),
+            iterations: problem.iterations,
+            every: options.frame_every.max(1),
+        })
+    }
+
+    /// Whether iteration `k` is drawn as the run goes.
+    fn due(&self, k: usize) -> bool {
+        k == 0 || k == self.iterations || k.is_multiple_of(self.every)
+    }
+
+    /// Both pictures of `record`.
+    fn draw(&self, record: &IterationRecord) -> Result<()> {
+        let k = record.iteration;
+        let name = |what: &str| self.frames.join(format!("iteration_{k:03}_{what}.png"));
+        self.draw_over(
+            &record.initial_positions,
+            &self.target_initial,
+            &name("initial"),
+        )?;
+        self.draw_over(&record.final_positions, &self.target, &name("final"))
+    }
+
+    /// `liquid` (blue) drawn over `under` (the target, orange) into `path`.
+    fn draw_over(&self, liquid: &[f32], under: &[f32], path: &Path) -> Result<()> {
+        let d = self.domain.dim();
+        let mut positions = under.to_vec();
+        positions.extend_from_slice(liquid);
+        let mut kinds = vec![KIND_TARGET; under.len() / d];
+        kinds.extend(std::iter::repeat_n(KIND_LIQUID, liquid.len() / d));
+        let image = render_frame(
+            &positions,
+            d,
+            &kinds,
+            self.domain.lower(),
+            self.domain.upper(),
+            self.domain.resolution(),
+            Some(&self.solid),
+            &self.style,
+        )?;
+        write_png(path, &image)?;
+        Ok(())
+    }
+}
+
+/// `loss.csv` and `loss.png` (not drawn when no loss is finite).
+fn write_loss_files(dir: &OutputDir, records: &[IterationRecord]) -> Result<()> {
+    write_loss_csv(&dir.path().join("loss.csv"), records)?;
     let losses: Vec<f32> = records.iter().map(|r| r.loss).collect();
-    let loss_png = out.join("loss.png");
+    let loss_png = dir.path().join("loss.png");
     match plot_losses(&losses) {
         Some(plot) => plot
             .write_png(&loss_png)
             .with_context(|| format!("drawing {}", loss_png.display()))?,
         None => tracing::warn!("no finite loss: {} not drawn", loss_png.display()),
     }
+    Ok(())
+}
 
+/// The summary of a run: losses, convergence, the distances to the target before and after,
+/// and, through a learned simulator, the same initial positions simulated with FLIP.
+///
+/// # Errors
+/// A run that stopped before its first iteration, a failing distance or FLIP simulation.
+fn summarize<B: AutodiffBackend + LatticeKernels + GnsKernels>(
+    problem: &OptimizeProblem<B>,
+    gns: Option<&GnsForward<B>>,
+    outcome: &OptimizeOutcome,
+    elapsed: f64,
+    origin: &str,
+) -> Result<OptimizeSummary> {
+    let records = &outcome.records;
     let (first, last) = match (records.first(), records.last()) {
         (Some(f), Some(l)) => (f, l),
         _ => bail!(
@@ -377,18 +438,20 @@ pub fn optimize<B: AutodiffBackend + LatticeKernels + GnsKernels>(
                 .map_or("unknown reason".into(), ToString::to_string)
         ),
     };
+    let d = problem.simulation.domain().dim();
+    let target = problem.target.to_vec();
     let distances = |r: &IterationRecord| set_distances(&r.final_positions, &target, d);
     let (before, after) = (distances(first)?, distances(last)?);
-    let converged_at = convergence_iteration(&losses);
-    let flip_check = match &gns {
+    let losses: Vec<f32> = records.iter().map(|r| r.loss).collect();
+    let flip_check = match gns {
         Some(_) => {
             let through_flip = |r: &IterationRecord| -> Result<_> {
                 let initial = phi_core::Tensor::<B>::from_vec(
                     r.initial_positions.clone(),
                     &[r.initial_positions.len() / d, d],
-                    &device,
+                    &B::default_device(),
                 )?;
-                let end = Forward::run(&problem, &initial)
+                let end = Forward::run(problem, &initial)
                     .with_context(|| format!("{origin}: simulating the optimum with FLIP"))?;
                 Ok(set_distances(&end.to_vec(), &target, d)?)
             };
@@ -400,38 +463,21 @@ pub fn optimize<B: AutodiffBackend + LatticeKernels + GnsKernels>(
         }
         None => None,
     };
-    let summary = OptimizeSummary {
+    Ok(OptimizeSummary {
         backend: B::name().to_string(),
-        simulator: match &gns {
-            Some(gns) => format!("gns {}", gns.name()),
-            None => "flip".into(),
-        },
+        simulator: gns.map_or_else(|| "flip".into(), |gns| format!("gns {}", gns.name())),
         loss: problem.loss.name().into(),
         particles: problem.initial.len(),
         iterations: records.len(),
+        converged_at: convergence_iteration(&losses),
         losses,
-        converged_at,
         chamfer: [before.chamfer, after.chamfer],
         wasserstein: [before.wasserstein, after.wasserstein],
         rms_distance: [first.rms_distance, last.rms_distance],
         seconds_per_iteration: elapsed / records.len().max(1) as f64,
         stopped: outcome.stopped.as_ref().map(ToString::to_string),
         flip_check,
-    };
-    let json = serde_json::json!({ "config": config, "summary": summary });
-    write_atomic(&out.join("summary.json"), |w| -> Result<(), OutputError> {
-        serde_json::to_writer_pretty(&mut *w, &json)
-            .map_err(|e| OutputError::InvalidInput(e.to_string()))?;
-        Ok(())
-    })?;
-    if let Some(e) = outcome.stopped {
-        bail!(
-            "{origin}: {e}; the outputs of the last good iteration ({}) are in {}",
-            last.iteration,
-            out.display()
-        );
-    }
-    Ok(summary)
+    })
 }
 
 fn write_loss_csv(path: &Path, records: &[IterationRecord]) -> Result<()> {

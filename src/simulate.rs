@@ -31,21 +31,21 @@
 //! recorded frames) and a run that needs more than the limit (`--memory-limit`, else
 //! `PHI_MEMORY_LIMIT`, else the machine's memory) is refused, naming the key.
 
-use std::io::Write;
+use std::cell::Cell;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use anyhow::{Context, Result};
-
 use phi_core::fields::LatticeKernels;
-use phi_flip::{Particles, RecordedFrame, Recording, Scene, TrajectoryArrays};
+use phi_flip::{
+    FlipSimulation, RecordedFrame, Recording, RunTotals, Scene, SceneRun, TrajectoryArrays,
+};
+use phi_io::output_dir::{OutputDir, OutputSubdir, Outputs};
 use serde::Serialize;
 
-use crate::output::target::{OutputSubdir, Outputs, check_dir};
+use crate::output::sink::{Every, FrameSink, FrameView};
 use crate::output::vtk::{VtkFrame, VtkSeries};
 use crate::output::{
-    ArrayData, FrameStyle, GifWriter, KIND_LIQUID, NpyArray, OutputError, render_frame,
-    write_atomic, write_npz, write_png,
+    ArrayData, FrameStyle, GifWriter, KIND_LIQUID, NpyArray, render_frame, write_npz, write_png,
 };
 
 /// How to run and what to write.
@@ -138,7 +138,47 @@ fn recorded_bytes_per_particle(d: usize, apic: bool) -> f64 {
 pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> Result<RunSummary> {
     let origin = options.scene.display().to_string();
     let steps = options.steps.unwrap_or(scene.simulation.steps);
-    let limit = match options.memory_limit {
+    check_memory(scene, &origin, steps, options.memory_limit)?;
+    let dir = prepare_out_dir(&options.out, options.force)?;
+    let run = SceneRun::<B>::new(scene, &origin, &B::default_device())?;
+    let frames = Cell::new(0);
+    let sinks = frame_sinks(&run, options, dir.path(), &frames)?;
+    let mut trajectory = TrajectorySink {
+        out: dir.path().to_path_buf(),
+        history: run.recording(),
+        checkpoint_every: options.checkpoint_every,
+        steps,
+        written: 0,
+    };
+    trajectory.history.reserve(steps.saturating_add(1));
+    let record = RunRecord {
+        dim: run.simulation().domain().dim(),
+        dt: run.simulation().params().dt,
+        dir,
+        origin,
+        scene,
+        backend: B::name(),
+    };
+    let mut state = RunState {
+        run,
+        steps,
+        totals: RunTotals::default(),
+        record,
+        trajectory,
+        sinks,
+        frames: &frames,
+    };
+    state.record.write(&state.summary(false))?;
+    let bar = crate::progress::step_bar(steps, options.progress);
+    let outcome = state.step_all(&bar);
+    bar.finish_and_clear();
+    state.finish(outcome)
+}
+
+/// Refuses a scene whose run would need more memory than `limit` (`None`: the limit of
+/// [`crate::memory::memory_limit`]), naming the key.
+fn check_memory(scene: &Scene, origin: &str, steps: usize, limit: Option<u64>) -> Result<()> {
+    let limit = match limit {
         Some(limit) => limit as f64,
         None => match crate::memory::memory_limit()? {
             u64::MAX => f64::INFINITY,
@@ -147,195 +187,137 @@ pub fn simulate<B: LatticeKernels>(scene: &Scene, options: &SimulateOptions) -> 
     };
     let apic = scene.simulation.scheme == phi_flip::Scheme::Apic;
     scene.check_memory(
-        &origin,
+        origin,
         steps,
         steps.saturating_add(1),
         recorded_bytes_per_particle(scene.dim(), apic),
         limit,
     )?;
-    let out = &options.out;
-    prepare_out_dir(out, options.force)?;
-    let device = B::default_device();
-    let setup = scene.build::<B>(&origin, &device)?;
-    let sim = setup.simulation;
-    let d = sim.domain().dim();
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let frames_dir = out.join("frames");
-    if options.frame_every > 0 {
-        std::fs::create_dir_all(&frames_dir)
-            .with_context(|| format!("creating {}", frames_dir.display()))?;
+    Ok(())
+}
+
+/// A run of `phi simulate` under way: the simulation, its totals, and where its frames go.
+struct RunState<'a, B: LatticeKernels> {
+    run: SceneRun<B>,
+    steps: usize,
+    totals: RunTotals,
+    record: RunRecord<'a>,
+    trajectory: TrajectorySink,
+    sinks: Vec<Box<dyn FrameSink + 'a>>,
+    /// Pictures rendered so far.
+    frames: &'a Cell<usize>,
+}
+
+impl<B: LatticeKernels> RunState<'_, B> {
+    /// The summary so far; `rates`: with the mean solver iterations and the steps per second
+    /// (at the end of a run).
+    fn summary(&self, rates: bool) -> RunSummary {
+        let t = &self.totals;
+        RunSummary {
+            backend: self.record.backend.to_string(),
+            steps: t.steps,
+            particles: self.run.particles().len(),
+            simulation_seconds: t.seconds,
+            steps_per_second: if rates { t.steps_per_second() } else { 0.0 },
+            solver_iterations_mean: if rates {
+                t.solver_iterations_mean()
+            } else {
+                0.0
+            },
+            solver_iterations_max: t.solver_iterations_max,
+            solver_residual_max: t.solver_residual_max,
+            max_displacement_cells: t.max_displacement_cells,
+            frames: self.frames.get(),
+            trajectory_frames: self.trajectory.written,
+            cfl_max: t.cfl_max,
+            substeps: t.substeps,
+            complete: false,
+            failure: None,
+        }
     }
 
-    let mut summary = RunSummary {
-        backend: B::name().to_string(),
-        steps: 0,
-        particles: setup.particles.len(),
-        simulation_seconds: 0.0,
-        steps_per_second: 0.0,
-        solver_iterations_mean: 0.0,
-        solver_iterations_max: 0,
-        solver_residual_max: 0.0,
-        max_displacement_cells: 0.0,
-        frames: 0,
-        trajectory_frames: 0,
-        cfl_max: 0.0,
-        substeps: 0,
-        complete: false,
-        failure: None,
-    };
-    let dt = sim.params().dt;
-    write_run_file(out, &origin, scene, dt, d, &summary)?;
-
-    let solid = sim.solid_cells(0.0)?;
-    let style = FrameStyle {
-        pixels_per_cell: options.pixels_per_cell,
-        ..FrameStyle::default()
-    };
-    let mut gif: Option<GifWriter> = None;
-    let mut history = Recording::new(d, dt, apic);
-    history.reserve(steps.saturating_add(1));
-    let mut particles: Particles<B> = setup.particles;
-    history.push(&particles);
-    let mut vtk = (options.vtk_every > 0)
-        .then(|| VtkSeries::create(out, "simulation", "vtk"))
-        .transpose()?;
-    if let Some(series) = vtk.as_mut() {
-        write_vtk_frame(series, 0, &history.frames()[0], dt, d)?;
-    }
-
-    let bar = crate::progress::step_bar(steps, options.progress);
-
-    let mut iterations_total = 0usize;
-    let render = |step: usize,
-                  host: &[f32],
-                  gif: &mut Option<GifWriter>,
-                  frames: &mut usize|
-     -> Result<()> {
-        let time = step as f32 * dt;
-        let solid_now = if sim.obstacles().iter().any(|o| o.is_moving()) {
-            sim.solid_cells(time)?
-        } else {
-            solid.clone()
-        };
-        let kinds = vec![KIND_LIQUID; host.len() / d];
-        let view = side_view(host, d, sim.domain(), &solid_now);
-        let image = render_frame(
-            &view.positions,
-            d,
-            &kinds,
-            &view.lower,
-            &view.upper,
-            &view.resolution,
-            Some(&view.solid),
-            &style,
-        )?;
-        let path = frames_dir.join(format!("frame_{step:05}.png"));
-        write_png(&path, &image)?;
-        if gif.is_none() {
-            *gif = Some(GifWriter::create(
-                out.join("simulation.gif"),
-                image.width,
-                image.height,
-                5,
-            )?);
-        }
-        if let Some(g) = gif.as_mut() {
-            g.add_frame(&image)?;
-        }
-        *frames += 1;
-        Ok(())
-    };
-
-    let mut run = || -> Result<()> {
-        if options.frame_every > 0 {
-            render(
-                0,
-                &history.frames()[0].positions,
-                &mut gif,
-                &mut summary.frames,
-            )?;
-        }
-        for step in 0..steps {
-            let started = Instant::now();
-            let (next, stats) = sim
-                .step(&particles, step)
-                .with_context(|| format!("{origin}: the simulation failed"))?;
-            summary.simulation_seconds += started.elapsed().as_secs_f64();
-            particles = next;
-            iterations_total += stats.solve.iterations;
-            summary.solver_iterations_max =
-                summary.solver_iterations_max.max(stats.solve.iterations);
-            summary.solver_residual_max = summary.solver_residual_max.max(stats.solve.residual);
-            summary.max_displacement_cells = summary
-                .max_displacement_cells
-                .max(stats.max_displacement_cells);
-            summary.cfl_max = summary.cfl_max.max(stats.cfl);
-            summary.substeps += stats.substeps;
-            summary.steps = step + 1;
-            summary.particles = particles.len();
-            history.push(&particles);
-            if let Some(series) = vtk.as_mut()
-                && (step + 1) % options.vtk_every == 0
-            {
-                write_vtk_frame(series, step + 1, &history.frames()[step + 1], dt, d)?;
-            }
-            if options.frame_every > 0 && (step + 1) % options.frame_every == 0 {
-                render(
-                    step + 1,
-                    &history.frames()[step + 1].positions,
-                    &mut gif,
-                    &mut summary.frames,
-                )?;
-            }
-            if options.checkpoint_every > 0
-                && (step + 1) % options.checkpoint_every == 0
-                && step + 1 < steps
-            {
-                write_trajectory(out, &history)?;
-                summary.trajectory_frames = history.len();
-                write_run_file(out, &origin, scene, dt, d, &summary)?;
-            }
-            bar.set_message(format!("{} particles", particles.len()));
+    /// Hands the start frame and the state after every step to the sinks.
+    fn step_all(&mut self, bar: &indicatif::ProgressBar) -> Result<()> {
+        self.deliver(0)?;
+        for step in 1..=self.steps {
+            self.run
+                .step_counted(&mut self.totals)
+                .with_context(|| format!("{}: the simulation failed", self.record.origin))?;
+            self.deliver(step)?;
+            bar.set_message(format!("{} particles", self.run.particles().len()));
             bar.inc(1);
         }
         Ok(())
-    };
-    let outcome = run();
-    bar.finish_and_clear();
-
-    summary.solver_iterations_mean = iterations_total as f64 / summary.steps.max(1) as f64;
-    summary.steps_per_second = summary.steps as f64 / summary.simulation_seconds.max(1e-12);
-    // What exists is written whether or not the run succeeded; on success its errors count.
-    let trajectory = write_trajectory(out, &history);
-    if trajectory.is_ok() {
-        summary.trajectory_frames = history.len();
     }
-    let closed = gif.map_or(Ok(()), |g| g.finish().map_err(anyhow::Error::from));
-    match outcome {
-        Ok(()) => {
-            trajectory?;
-            closed?;
-            summary.complete = true;
-            write_run_file(out, &origin, scene, dt, d, &summary)?;
-            Ok(summary)
+
+    /// The current state, after `step` steps, to every sink; `run.json` follows a checkpoint
+    /// of the trajectory.
+    fn deliver(&mut self, step: usize) -> Result<()> {
+        let state = self.run.frame();
+        let before = self
+            .trajectory
+            .history
+            .frames()
+            .last()
+            .map_or_else(|| state.positions.clone(), |f| f.positions.clone());
+        let view = FrameView {
+            frame: step,
+            step,
+            positions: &state.positions,
+            before: &before,
+            truth: None,
+        };
+        for sink in &mut self.sinks {
+            sink.add_state(&view, &state)?;
         }
-        Err(error) => {
-            summary.failure = Some(format!("{error:#}"));
-            let kept = [
-                trajectory.err(),
-                closed.err(),
-                write_run_file(out, &origin, scene, dt, d, &summary).err(),
-            ];
-            for e in kept.into_iter().flatten() {
-                tracing::warn!("while keeping what the failed run made: {e:#}");
+        let written = self.trajectory.written;
+        self.trajectory.add_state(&view, &state)?;
+        if self.trajectory.written != written {
+            self.record.write(&self.summary(false))?;
+        }
+        Ok(())
+    }
+
+    /// Closes the outputs and writes `run.json` whether or not the run succeeded; on success
+    /// their errors count, after a failure they are logged and the failure is returned.
+    fn finish(self, outcome: Result<()>) -> Result<RunSummary> {
+        let mut summary = self.summary(true);
+        let recorded = self.trajectory.history.len();
+        let trajectory = Box::new(self.trajectory).finish();
+        if trajectory.is_ok() {
+            summary.trajectory_frames = recorded;
+        }
+        let mut closed = Ok(());
+        for sink in self.sinks {
+            let result = sink.finish();
+            if closed.is_ok() {
+                closed = result;
             }
-            Err(error.context(format!(
-                "the run stopped after {} of {steps} steps; {} holds its {} frames \
-                 (run.json: \"complete\": false)",
-                summary.steps,
-                out.display(),
-                summary.trajectory_frames
-            )))
+        }
+        let record = self.record;
+        match outcome {
+            Ok(()) => {
+                trajectory?;
+                closed?;
+                summary.complete = true;
+                record.write(&summary)?;
+                Ok(summary)
+            }
+            Err(error) => {
+                summary.failure = Some(format!("{error:#}"));
+                let kept = [trajectory.err(), closed.err(), record.write(&summary).err()];
+                for e in kept.into_iter().flatten() {
+                    tracing::warn!("while keeping what the failed run made: {e:#}");
+                }
+                Err(error.context(format!(
+                    "the run stopped after {} of {} steps; {} holds its {} frames \
+                     (run.json: \"complete\": false)",
+                    summary.steps,
+                    self.steps,
+                    record.dir.path().display(),
+                    summary.trajectory_frames
+                )))
+            }
         }
     }
 }
@@ -366,61 +348,226 @@ pub const RUN_OUTPUTS: Outputs = Outputs {
     marker: None,
 };
 
-/// Makes sure `out` can take a run: missing or empty, or, with `force`, a previous run, whose
-/// files are removed ([`crate::output::target::check_dir`]).
+/// Claims `out` for a run ([`OutputDir::claim`]): missing or empty, or, with `force`, a
+/// previous run, whose files are removed; then creates it.
 ///
 /// # Errors
 /// A file where the directory should be; a non-empty directory without `force`; with `force`,
 /// one that holds anything `phi simulate` does not write (a dataset, other files).
-pub fn prepare_out_dir(out: &Path, force: bool) -> Result<()> {
-    check_dir(out, &RUN_OUTPUTS, force)?.remove()
+pub fn prepare_out_dir(out: &Path, force: bool) -> Result<OutputDir> {
+    let mut dir = OutputDir::claim(out, &RUN_OUTPUTS, force)?;
+    dir.clear_previous()?;
+    dir.create()?;
+    Ok(dir)
 }
 
-fn write_run_file(
+/// `run.json`: the scene, the backend and the run's summary, rewritten at every checkpoint.
+struct RunRecord<'a> {
+    dir: OutputDir,
+    origin: String,
+    scene: &'a Scene,
+    backend: &'static str,
+    dt: f32,
+    dim: usize,
+}
+
+impl RunRecord<'_> {
+    fn write(&self, summary: &RunSummary) -> Result<()> {
+        let file = RunFile {
+            scene_file: self.origin.clone(),
+            scene: self.scene,
+            dimension: self.dim,
+            dt: self.dt,
+            phi_version: env!("CARGO_PKG_VERSION"),
+            summary,
+        };
+        let text = serde_json::to_string_pretty(&file)?;
+        self.dir.write_bytes("run.json", text.as_bytes())?;
+        Ok(())
+    }
+}
+
+/// The sinks of `options` besides the trajectory: the VTK series (every `vtk_every` steps)
+/// and the pictures with the GIF (every `frame_every` steps), counting pictures in `frames`.
+fn frame_sinks<'a, B: LatticeKernels>(
+    run: &SceneRun<B>,
+    options: &SimulateOptions,
     out: &Path,
-    origin: &str,
-    scene: &Scene,
-    dt: f32,
-    d: usize,
-    summary: &RunSummary,
-) -> Result<()> {
-    let file = RunFile {
-        scene_file: origin.to_string(),
-        scene,
-        dimension: d,
-        dt,
-        phi_version: env!("CARGO_PKG_VERSION"),
-        summary,
-    };
-    let text = serde_json::to_string_pretty(&file)?;
-    let path = out.join("run.json");
-    write_atomic(&path, |w| {
-        w.write_all(text.as_bytes())
-            .map_err(|e| OutputError::io(&path, "cannot write", e))
-    })?;
-    Ok(())
+    frames: &'a Cell<usize>,
+) -> Result<Vec<Box<dyn FrameSink + 'a>>> {
+    let simulation = run.simulation();
+    let dt = simulation.params().dt;
+    let mut sinks: Vec<Box<dyn FrameSink + 'a>> = Vec::new();
+    if options.vtk_every > 0 {
+        let series = VtkSeries::create(out, "simulation", "vtk")?;
+        let vtk = VtkSink {
+            series,
+            dt,
+            dim: simulation.domain().dim(),
+        };
+        sinks.push(Box::new(Every::new(options.vtk_every, vtk)));
+    }
+    if options.frame_every > 0 {
+        let frames_dir = out.join("frames");
+        std::fs::create_dir_all(&frames_dir)
+            .with_context(|| format!("creating {}", frames_dir.display()))?;
+        let pictures = Pictures {
+            solid: simulation.solid_cells(0.0)?,
+            simulation: simulation.clone(),
+            style: FrameStyle {
+                pixels_per_cell: options.pixels_per_cell,
+                ..FrameStyle::default()
+            },
+            frames_dir,
+            gif_path: out.join("simulation.gif"),
+            gif: None,
+            count: frames,
+        };
+        sinks.push(Box::new(Every::new(options.frame_every, pictures)));
+    }
+    Ok(sinks)
 }
 
-/// Frame `step` of the run as a VTK file of the series (all particles liquid).
-fn write_vtk_frame(
-    series: &mut VtkSeries,
-    step: usize,
-    frame: &RecordedFrame,
+/// `frames/frame_NNNNN.png` and `simulation.gif`: the liquid over the solid cells at the
+/// frame's time, seen from the side in 3D.
+struct Pictures<'a, B: LatticeKernels> {
+    simulation: FlipSimulation<B>,
+    /// The solid cells at time 0 (all times, when no obstacle moves).
+    solid: Vec<bool>,
+    style: FrameStyle,
+    frames_dir: PathBuf,
+    gif_path: PathBuf,
+    gif: Option<GifWriter>,
+    count: &'a Cell<usize>,
+}
+
+impl<B: LatticeKernels> FrameSink for Pictures<'_, B> {
+    fn add(&mut self, frame: &FrameView<'_>) -> Result<()> {
+        let sim = &self.simulation;
+        let d = sim.domain().dim();
+        let time = frame.step as f32 * sim.params().dt;
+        let solid_now = if sim.obstacles().iter().any(|o| o.is_moving()) {
+            sim.solid_cells(time)?
+        } else {
+            self.solid.clone()
+        };
+        let kinds = vec![KIND_LIQUID; frame.positions.len() / d];
+        let view = side_view(frame.positions, d, sim.domain(), &solid_now);
+        let image = render_frame(
+            &view.positions,
+            d,
+            &kinds,
+            &view.lower,
+            &view.upper,
+            &view.resolution,
+            Some(&view.solid),
+            &self.style,
+        )?;
+        let path = self.frames_dir.join(format!("frame_{:05}.png", frame.step));
+        write_png(&path, &image)?;
+        let gif = match &mut self.gif {
+            Some(gif) => gif,
+            None => self.gif.insert(GifWriter::create(
+                &self.gif_path,
+                image.width,
+                image.height,
+                5,
+            )?),
+        };
+        gif.add_frame(&image)?;
+        self.count.set(self.count.get() + 1);
+        Ok(())
+    }
+
+    fn finish(self: Box<Self>) -> Result<()> {
+        if let Some(gif) = self.gif {
+            gif.finish()?;
+        }
+        Ok(())
+    }
+}
+
+/// `vtk/frame_NNNNN.vtu` and `simulation.pvd`: positions and velocities (all particles
+/// liquid); from positions alone the velocity is the backward difference over the frames.
+struct VtkSink {
+    series: VtkSeries,
     dt: f32,
-    d: usize,
-) -> Result<()> {
-    let types = vec![i32::from(KIND_LIQUID); frame.positions.len() / d];
-    series.add(
-        step,
-        &VtkFrame {
-            time: f64::from(step as f32 * dt),
-            dim: d,
-            positions: &frame.positions,
-            velocities: &frame.velocities,
-            particle_type: &types,
-        },
-    )?;
-    Ok(())
+    dim: usize,
+}
+
+impl FrameSink for VtkSink {
+    fn add(&mut self, frame: &FrameView<'_>) -> Result<()> {
+        self.add_state(frame, &state_from_positions(frame, self.dt))
+    }
+
+    fn add_state(&mut self, frame: &FrameView<'_>, state: &RecordedFrame) -> Result<()> {
+        let types = vec![i32::from(KIND_LIQUID); state.positions.len() / self.dim];
+        self.series.add(
+            frame.step,
+            &VtkFrame {
+                time: f64::from(frame.step as f32 * self.dt),
+                dim: self.dim,
+                positions: &state.positions,
+                velocities: &state.velocities,
+                particle_type: &types,
+            },
+        )?;
+        Ok(())
+    }
+
+    fn finish(self: Box<Self>) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// A state from positions alone: the velocity is the backward difference over one step `dt`
+/// (zero for the start frame, whose `before` is itself), no APIC matrices.
+fn state_from_positions(frame: &FrameView<'_>, dt: f32) -> RecordedFrame {
+    RecordedFrame {
+        positions: frame.positions.to_vec(),
+        velocities: frame
+            .positions
+            .iter()
+            .zip(frame.before)
+            .map(|(now, before)| (now - before) / dt)
+            .collect(),
+        affine: None,
+    }
+}
+
+/// `trajectory.npz`: every state, rewritten every `checkpoint_every` steps and at the end.
+struct TrajectorySink {
+    out: PathBuf,
+    history: Recording,
+    checkpoint_every: usize,
+    steps: usize,
+    /// Frames in the file on disk.
+    written: usize,
+}
+
+impl FrameSink for TrajectorySink {
+    fn add(&mut self, frame: &FrameView<'_>) -> Result<()> {
+        let state = state_from_positions(frame, self.history.dt());
+        self.add_state(frame, &state)
+    }
+
+    fn add_state(&mut self, frame: &FrameView<'_>, state: &RecordedFrame) -> Result<()> {
+        self.history.push_frame(state.clone());
+        let step = frame.step;
+        if self.checkpoint_every > 0
+            && step > 0
+            && step.is_multiple_of(self.checkpoint_every)
+            && step < self.steps
+        {
+            write_trajectory(&self.out, &self.history)?;
+            self.written = self.history.len();
+        }
+        Ok(())
+    }
+
+    fn finish(self: Box<Self>) -> Result<()> {
+        write_trajectory(&self.out, &self.history)
+    }
 }
 
 /// The trajectory so far as `trajectory.npz` (see the module docs).

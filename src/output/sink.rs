@@ -1,10 +1,13 @@
 //! Frame sinks: where the frames of a run go as they are made (a GIF, a VTK series, ...).
 //!
 //! A command's loop hands every frame to each of its sinks as a [`FrameView`] and closes them
-//! with [`FrameSink::finish`]; a sink keeps what it wants of each frame. [`Every`] passes on
-//! the start frame and every `k`-th step only, as `--frame-every` and `--vtk-every` ask.
+//! with [`FrameSink::finish`]; a sink keeps what it wants of each frame. A simulation hands its
+//! full state too ([`FrameSink::add_state`]: velocities, APIC matrices), which sinks that store
+//! positions only ignore. [`Every`] passes on the start frame and every `k`-th step only, as
+//! `--frame-every` and `--vtk-every` ask.
 
 use anyhow::Result;
+use phi_flip::RecordedFrame;
 
 /// One frame of a run, with the frame before it and, for a rollout, the ground truth.
 #[derive(Debug, Clone, Copy)]
@@ -28,6 +31,16 @@ pub trait FrameSink {
     /// # Errors
     /// The sink's write errors, naming its file.
     fn add(&mut self, frame: &FrameView<'_>) -> Result<()>;
+
+    /// Takes one frame with the simulator's state on the host (`state.positions` are
+    /// `frame.positions`); a sink that stores positions only takes it as [`FrameSink::add`].
+    ///
+    /// # Errors
+    /// The sink's write errors, naming its file.
+    fn add_state(&mut self, frame: &FrameView<'_>, state: &RecordedFrame) -> Result<()> {
+        let _ = state;
+        self.add(frame)
+    }
 
     /// Closes the output (a GIF's trailer); a run that stops early closes its sinks too.
     ///
@@ -57,6 +70,13 @@ impl<S: FrameSink> FrameSink for Every<S> {
     fn add(&mut self, frame: &FrameView<'_>) -> Result<()> {
         if frame.step.is_multiple_of(self.every) {
             self.sink.add(frame)?;
+        }
+        Ok(())
+    }
+
+    fn add_state(&mut self, frame: &FrameView<'_>, state: &RecordedFrame) -> Result<()> {
+        if frame.step.is_multiple_of(self.every) {
+            self.sink.add_state(frame, state)?;
         }
         Ok(())
     }
