@@ -210,22 +210,7 @@ pub struct RenderArgs {
 pub fn run(command: DatasetCommand) -> Result<()> {
     match command {
         DatasetCommand::Generate(args) => super::generate::run(args),
-        DatasetCommand::Merge { out, shards, force } => {
-            let (out, shards) = merge_paths(out, shards)?;
-            let summary = merge(&out, &shards, force)?;
-            println!(
-                "merged {} shard(s) into {}: {}",
-                shards.len(),
-                out.display(),
-                summary
-                    .counts
-                    .iter()
-                    .map(|(s, n)| format!("{s} {n}"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            );
-            Ok(())
-        }
+        DatasetCommand::Merge { out, shards, force } => run_merge(out, shards, force),
         DatasetCommand::Stats {
             data,
             data_positional,
@@ -235,27 +220,16 @@ pub fn run(command: DatasetCommand) -> Result<()> {
             out,
             force,
             print_every,
-        } => {
-            let dir = crate::cli::dataset_dir("phi dataset stats", data, data_positional)?;
-            let report = dataset_stats(&StatsOptions {
-                dir: dir.clone(),
-                split,
-                radius,
-                limit: trajectories,
-                out: out.clone(),
-                force,
-                progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
-            })?;
-            print!("{}", format_report(&report, &dir, radius, print_every));
-            if let Some(out) = out {
-                println!(
-                    "wrote {} and {}",
-                    out.display(),
-                    super::stats::heatmap_path(&out).display()
-                );
-            }
-            Ok(())
-        }
+        } => run_stats(
+            data,
+            data_positional,
+            split,
+            radius,
+            trajectories,
+            out,
+            force,
+            print_every,
+        ),
         DatasetCommand::Export {
             data,
             data_positional,
@@ -263,82 +237,151 @@ pub fn run(command: DatasetCommand) -> Result<()> {
             out,
             force,
             python,
-        } => {
-            let dir = crate::cli::dataset_dir("phi dataset export", data, data_positional)?;
-            if let (Ok(data), Ok(target)) = (dir.canonicalize(), out.canonicalize())
-                && data.starts_with(&target)
-            {
-                anyhow::bail!(
-                    "--out {} holds the dataset being exported; choose another directory",
-                    out.display()
-                );
-            }
-            let staging = prepare_output(&out, &EXPORT_OUTPUTS, force)?;
-            let written = export(&ExportOptions {
-                dir,
-                format,
-                out: staging.clone(),
-                python,
-                progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
-            })
-            .and_then(|counts| {
-                phi_io::publish_dir(&staging, &out)?;
-                Ok(counts)
-            });
-            let counts = discard_on_error(written, &staging)?;
-            for (split, count) in counts {
-                let file = match format {
-                    ExportFormat::Npz | ExportFormat::Gns => format!("{split}.npz"),
-                    ExportFormat::Tfrecord => format!("{split}.tfrecord"),
-                    ExportFormat::Lagrangebench => format!("{split}.h5"),
-                };
-                println!(
-                    "{split}: {} -> {}",
-                    trajectories(count),
-                    out.join(file).display()
-                );
-            }
-            if format != ExportFormat::Npz {
-                println!("wrote {}", out.join("metadata.json").display());
-            }
-            Ok(())
-        }
+        } => run_export(data, data_positional, format, out, force, python),
         DatasetCommand::Import {
             data,
             data_positional,
             out,
             force,
-        } => {
-            let input = crate::cli::dataset_dir("phi dataset import", data, data_positional)?;
-            let staging = prepare_output(&out, &IMPORT_OUTPUTS, force)?;
-            let imported = (|| -> Result<()> {
-                let bar = crate::progress::counter(
-                    "trajectories imported",
-                    std::io::IsTerminal::is_terminal(&std::io::stderr()),
-                );
-                phi_gns::data::tfrecord::import_tfrecord_with(&input, &staging, &|| bar.inc(1))?;
-                bar.finish_and_clear();
-                write_import_marker(&staging, &input)?;
-                phi_io::publish_dir(&staging, &out)?;
-                Ok(())
-            })();
-            discard_on_error(imported, &staging)?;
-            let dataset = phi_gns::data::Dataset::open(&out)?;
-            let counts: Vec<String> = dataset
-                .metadata()
-                .splits
-                .iter()
-                .map(|(s, n)| format!("{s} {n}"))
-                .collect();
-            println!(
-                "imported {} into {}: {}",
-                input.display(),
-                out.display(),
-                counts.join(", ")
-            );
-            Ok(())
-        }
+        } => run_import(data, data_positional, out, force),
     }
+}
+
+/// `phi dataset merge`: joins the shards and prints the counts.
+fn run_merge(out: Option<PathBuf>, shards: Vec<PathBuf>, force: bool) -> Result<()> {
+    let (out, shards) = merge_paths(out, shards)?;
+    let summary = merge(&out, &shards, force)?;
+    println!(
+        "merged {} shard(s) into {}: {}",
+        shards.len(),
+        out.display(),
+        summary
+            .counts
+            .iter()
+            .map(|(s, n)| format!("{s} {n}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    Ok(())
+}
+
+/// `phi dataset stats`: measures the dataset, prints the report, draws the figures.
+#[allow(clippy::too_many_arguments)]
+fn run_stats(
+    data: Option<PathBuf>,
+    data_positional: Option<PathBuf>,
+    split: Option<String>,
+    radius: f32,
+    trajectories: usize,
+    out: Option<PathBuf>,
+    force: bool,
+    print_every: usize,
+) -> Result<()> {
+    let dir = crate::cli::dataset_dir("phi dataset stats", data, data_positional)?;
+    let report = dataset_stats(&StatsOptions {
+        dir: dir.clone(),
+        split,
+        radius,
+        limit: trajectories,
+        out: out.clone(),
+        force,
+        progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
+    })?;
+    print!("{}", format_report(&report, &dir, radius, print_every));
+    if let Some(out) = out {
+        println!(
+            "wrote {} and {}",
+            out.display(),
+            super::stats::heatmap_path(&out).display()
+        );
+    }
+    Ok(())
+}
+
+/// `phi dataset export`: writes the dataset in another format, published whole.
+fn run_export(
+    data: Option<PathBuf>,
+    data_positional: Option<PathBuf>,
+    format: ExportFormat,
+    out: PathBuf,
+    force: bool,
+    python: PathBuf,
+) -> Result<()> {
+    let dir = crate::cli::dataset_dir("phi dataset export", data, data_positional)?;
+    if let (Ok(data), Ok(target)) = (dir.canonicalize(), out.canonicalize())
+        && data.starts_with(&target)
+    {
+        anyhow::bail!(
+            "--out {} holds the dataset being exported; choose another directory",
+            out.display()
+        );
+    }
+    let staging = prepare_output(&out, &EXPORT_OUTPUTS, force)?;
+    let written = export(&ExportOptions {
+        dir,
+        format,
+        out: staging.clone(),
+        python,
+        progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
+    })
+    .and_then(|counts| {
+        phi_io::publish_dir(&staging, &out)?;
+        Ok(counts)
+    });
+    let counts = discard_on_error(written, &staging)?;
+    for (split, count) in counts {
+        let file = match format {
+            ExportFormat::Npz | ExportFormat::Gns => format!("{split}.npz"),
+            ExportFormat::Tfrecord => format!("{split}.tfrecord"),
+            ExportFormat::Lagrangebench => format!("{split}.h5"),
+        };
+        println!(
+            "{split}: {} -> {}",
+            trajectories(count),
+            out.join(file).display()
+        );
+    }
+    if format != ExportFormat::Npz {
+        println!("wrote {}", out.join("metadata.json").display());
+    }
+    Ok(())
+}
+
+/// `phi dataset import`: reads TFRecord files into a dataset, published whole.
+fn run_import(
+    data: Option<PathBuf>,
+    data_positional: Option<PathBuf>,
+    out: PathBuf,
+    force: bool,
+) -> Result<()> {
+    let input = crate::cli::dataset_dir("phi dataset import", data, data_positional)?;
+    let staging = prepare_output(&out, &IMPORT_OUTPUTS, force)?;
+    let imported = (|| -> Result<()> {
+        let bar = crate::progress::counter(
+            "trajectories imported",
+            std::io::IsTerminal::is_terminal(&std::io::stderr()),
+        );
+        phi_gns::data::tfrecord::import_tfrecord_with(&input, &staging, &|| bar.inc(1))?;
+        bar.finish_and_clear();
+        write_import_marker(&staging, &input)?;
+        phi_io::publish_dir(&staging, &out)?;
+        Ok(())
+    })();
+    discard_on_error(imported, &staging)?;
+    let dataset = phi_gns::data::Dataset::open(&out)?;
+    let counts: Vec<String> = dataset
+        .metadata()
+        .splits
+        .iter()
+        .map(|(s, n)| format!("{s} {n}"))
+        .collect();
+    println!(
+        "imported {} into {}: {}",
+        input.display(),
+        out.display(),
+        counts.join(", ")
+    );
+    Ok(())
 }
 
 /// The dataset to write and the shards of `phi dataset merge`: `--out` and every positional
