@@ -669,3 +669,46 @@ fn side_view(
         solid: mask,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::output::read_npz;
+    use crate::output::test_util::temp_dir;
+
+    #[test]
+    fn positions_alone_give_backward_difference_velocities_in_the_trajectory() {
+        let dir = temp_dir("simulate-trajectory-sink");
+        let mut sink = TrajectorySink {
+            out: dir.clone(),
+            history: Recording::new(1, 0.5, false),
+            checkpoint_every: 2,
+            steps: 3,
+            written: 0,
+        };
+        let frames = [[1.0f32, 2.0], [1.5, 2.0], [2.5, 1.0], [2.5, 0.0]];
+        for (step, positions) in frames.iter().enumerate() {
+            let before = &frames[step.saturating_sub(1)];
+            let view = FrameView {
+                frame: step,
+                step,
+                positions,
+                before,
+                truth: None,
+            };
+            sink.add(&view).unwrap();
+            // A checkpoint after step 2 (of 3): the three frames so far on disk.
+            assert_eq!(sink.written, if step >= 2 { 3 } else { 0 }, "step {step}");
+        }
+        Box::new(sink).finish().unwrap();
+        let arrays = read_npz(dir.join("trajectory.npz")).unwrap();
+        let (_, velocities) = arrays
+            .iter()
+            .find(|(name, _)| name == "velocities")
+            .unwrap();
+        let expected = [0.0f32, 0.0, 1.0, 0.0, 2.0, -2.0, 0.0, -2.0];
+        assert_eq!(velocities.shape, vec![4, 2, 1]);
+        assert_eq!(velocities.data, ArrayData::F32(expected.to_vec()));
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}

@@ -123,4 +123,62 @@ mod tests {
         sink.finish().unwrap();
         assert_eq!(*seen.borrow(), vec![0, 3, 6, usize::MAX]);
     }
+
+    /// Records the velocities of the states it is given.
+    struct States<'a>(&'a std::cell::RefCell<Vec<(usize, Vec<f32>)>>);
+
+    impl FrameSink for States<'_> {
+        fn add(&mut self, _: &FrameView<'_>) -> Result<()> {
+            anyhow::bail!("a state was expected")
+        }
+
+        fn add_state(&mut self, frame: &FrameView<'_>, state: &RecordedFrame) -> Result<()> {
+            self.0
+                .borrow_mut()
+                .push((frame.step, state.velocities.clone()));
+            Ok(())
+        }
+
+        fn finish(self: Box<Self>) -> Result<()> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn states_reach_the_sink_on_its_steps_and_positions_only_sinks_take_them_as_frames() {
+        let seen = std::cell::RefCell::new(Vec::new());
+        let steps = std::cell::RefCell::new(Vec::new());
+        let mut sinks: Vec<Box<dyn FrameSink + '_>> = vec![
+            Box::new(Every::new(2, States(&seen))),
+            Box::new(Steps(&steps)),
+        ];
+        let p = [0.0f32; 2];
+        for step in 0..=4 {
+            let state = RecordedFrame {
+                positions: p.to_vec(),
+                velocities: vec![step as f32; 2],
+                affine: None,
+            };
+            let view = FrameView {
+                frame: step,
+                step,
+                positions: &p,
+                before: &p,
+                truth: None,
+            };
+            for sink in &mut sinks {
+                sink.add_state(&view, &state).unwrap();
+            }
+        }
+        let velocities = |v: f32| vec![v; 2];
+        assert_eq!(
+            *seen.borrow(),
+            vec![
+                (0, velocities(0.0)),
+                (2, velocities(2.0)),
+                (4, velocities(4.0))
+            ]
+        );
+        assert_eq!(*steps.borrow(), vec![0, 1, 2, 3, 4]);
+    }
 }
