@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 
 use phi_core::Tensor;
 use phi_gns::data::{Trajectory, Variant, read_metadata};
+use phi_gns::eval::{EmdCost, EvalOptions, evaluate_trajectory};
 use phi_gns::model::{
     Gns, GnsConfig, GnsKernels, GraphBatch, MODEL_FILE, ModelSpec, WEIGHTS_FILE, load_model,
     save_model,
@@ -62,6 +63,18 @@ fn rollout_on<B: GnsKernels>(
         range,
         &B::default_device(),
     )?)
+}
+
+/// Evaluates `model` on `trajectory` as `phi eval` does.
+fn evaluate_on<B: GnsKernels>(
+    model: &Gns<B>,
+    trajectory: &Trajectory,
+    options: &EvalOptions,
+) -> Result<phi_gns::eval::TrajectoryEvaluation, Error> {
+    evaluate_trajectory(model, trajectory, options, &B::default_device()).map_err(|e| match e {
+        phi_gns::eval::EvalError::Model(e) => Error::Model(e),
+        other => Error::argument(Area::Model, "evaluate", other.to_string()),
+    })
 }
 
 /// One step of `model` from `window` (`[N, C + 1, dim]`, the model's layout): the next
@@ -462,6 +475,103 @@ impl Model {
             on_model!(&self.inner, m => rollout_on(m, &trajectory, range))
         })?;
         Ok(to_numpy(py, &[steps, n, d], predicted)?.into_any())
+    }
+
+    /// Evaluates the model on one ground-truth trajectory as ``phi eval`` does (thesis section
+    /// 5.4), over its liquid particles, and returns the evaluation as a dict: ``mse_acc1``
+    /// (every one-step window, in the model's normalisation), ``mse20`` (rollouts of
+    /// ``short_rollout`` steps from frames ``C, C + 20, …``), ``mse400`` (the full rollout from
+    /// frame ``C``), ``emd``, ``sinkhorn``, ``kinetic_energy_error``, ``density_ratio``,
+    /// ``failed_step`` and the per-frame ``curves``; a metric of a rollout that blew up is
+    /// ``None``.
+    ///
+    /// Args:
+    ///     positions: float32 ``[T, N, d]`` in stored units (a dataset trajectory).
+    ///     particle_type: int64 ``[N]``.
+    ///     short_rollout: the length of MSE 20's rollouts.
+    ///     emd_cost: ``"sqeuclidean"`` or ``"euclidean"``.
+    ///     sinkhorn_epsilon, sinkhorn_every: the Sinkhorn divergence's ``ε`` and frame stride
+    ///         (0: none).
+    ///     density_radius: the radius of the density's neighbour counts; ``None`` is the
+    ///         model's connectivity radius.
+    ///
+    /// Raises:
+    ///     ModelError: arrays that do not fit the model, a trajectory too short for a window,
+    ///         one without liquid.
+    ///
+    /// The GIL is released while it runs.
+    #[pyo3(signature = (positions, particle_type, short_rollout = 20, emd_cost = "sqeuclidean", sinkhorn_epsilon = 1e-4, sinkhorn_every = 100, density_radius = None))]
+    #[allow(clippy::too_many_arguments)] // Python's keyword arguments
+    fn evaluate<'py>(
+        &self,
+        py: Python<'py>,
+        positions: &Bound<'py, PyAny>,
+        particle_type: &Bound<'py, PyAny>,
+        short_rollout: usize,
+        emd_cost: &str,
+        sinkhorn_epsilon: f32,
+        sinkhorn_every: usize,
+        density_radius: Option<f64>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let ground_cost = match emd_cost {
+            "sqeuclidean" => EmdCost::SquaredEuclidean,
+            "euclidean" => EmdCost::Euclidean,
+            other => {
+                return Err(Error::argument(
+                    Area::Model,
+                    "evaluate: emd_cost",
+                    format!("'{other}' is not a ground cost (use 'sqeuclidean' or 'euclidean')"),
+                )
+                .into());
+            }
+        };
+        if short_rollout == 0 {
+            return Err(Error::argument(
+                Area::Model,
+                "evaluate: short_rollout",
+                "must be at least 1",
+            )
+            .into());
+        }
+        let (shape, values) =
+            host_array::<f32>(positions, "float32", Area::Model, "evaluate: positions")?;
+        let (type_shape, types) = host_array::<i64>(
+            particle_type,
+            "int64",
+            Area::Model,
+            "evaluate: particle_type",
+        )?;
+        let [_, n, d] = shape[..] else {
+            return Err(Error::argument(
+                Area::Model,
+                "evaluate: positions",
+                format!("shape {}: expected [T, N, d]", shape_text(&shape)),
+            )
+            .into());
+        };
+        if type_shape != [n] {
+            return Err(Error::argument(
+                Area::Model,
+                "evaluate: particle_type",
+                format!("shape {}: expected ({n},)", shape_text(&type_shape)),
+            )
+            .into());
+        }
+        let mut options =
+            EvalOptions::new(density_radius.unwrap_or(self.spec().config.connectivity_radius));
+        options.short_rollout = short_rollout;
+        options.ground_cost = ground_cost;
+        options.sinkhorn_epsilon = sinkhorn_epsilon;
+        options.sinkhorn_every = sinkhorn_every;
+        let text = detached(py, || {
+            let trajectory = Trajectory::new(d, values, types, 0, 0)
+                .map_err(|e| Error::argument(Area::Model, "evaluate: trajectory", e.to_string()))?;
+            let evaluation = on_model!(&self.inner, m => evaluate_on(m, &trajectory, &options))?;
+            serde_json::to_string(&evaluation).map_err(|e| {
+                Error::argument(Area::Model, "evaluate", format!("cannot be written: {e}"))
+            })
+        })?;
+        py.import("json")?.call_method1("loads", (text,))
     }
 
     fn __repr__(&self) -> String {

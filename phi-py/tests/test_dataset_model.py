@@ -193,3 +193,33 @@ def test_predict_is_the_first_step_of_rollout(model_dir, dataset_dir, cli_rollou
         model.predict(positions[:2], types)
     with pytest.raises(phi_rs.ModelError, match="particle_type"):
         model.predict(window, types[:-1])
+
+
+def test_evaluate_agrees_with_rollout_and_the_metrics(model_dir, dataset_dir):
+    model = phi_rs.Model.load(model_dir)
+    positions, types = phi_rs.Dataset(dataset_dir)["train", 0]
+    c, liquid = model.input_velocities, types == 1
+    ev = model.evaluate(positions, types, short_rollout=5, sinkhorn_epsilon=1e-2,
+                        sinkhorn_every=1)
+    assert ev["start"] == c and ev["failed_step"] is None
+    assert ev["liquid_particles"] == liquid.sum()
+    # MSE 400 and its curve: the full rollout from frame C against the frames it predicts.
+    predicted = model.rollout(positions, types)
+    truth = positions[c + 1:]
+    assert ev["mse400"] == pytest.approx(phi_rs.position_mse(predicted, truth, types), rel=1e-12)
+    assert np.allclose(ev["curves"]["mse"], phi_rs.position_mse(predicted, truth, types,
+                                                                per_frame=True), rtol=1e-12)
+    # EMD and Sinkhorn divergence per frame over the liquid, averaged.
+    emd = [phi_rs.emd(p[liquid], t[liquid]) for p, t in zip(predicted, truth)]
+    assert ev["emd"] == pytest.approx(np.mean(emd), rel=1e-9)
+    sinkhorn = [phi_rs.sinkhorn(p[liquid], t[liquid], epsilon=1e-2)
+                for p, t in zip(predicted, truth)]
+    assert ev["sinkhorn"] == pytest.approx(np.mean(sinkhorn), rel=1e-9)
+    # MSE 20 (here 5): rollouts from frames C, C + 5, ... while 5 frames follow.
+    starts = range(c, positions.shape[0] - 5, 5)
+    short = [phi_rs.position_mse(model.rollout(positions, types, steps=5, start=s),
+                                 positions[s + 1:s + 6], types) for s in starts]
+    assert ev["short_windows"] == len(short)
+    assert ev["mse20"] == pytest.approx(np.mean(short), rel=1e-12)
+    with pytest.raises(phi_rs.ModelError, match="emd_cost"):
+        model.evaluate(positions, types, emd_cost="manhattan")

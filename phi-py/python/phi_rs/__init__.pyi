@@ -214,6 +214,20 @@ class Model:
     ) -> npt.NDArray[np.float32]:
         """Rolls the model out from frame ``start`` (default ``C``) of a ground-truth trajectory
         ``[T, N, d]``; returns the predicted frames ``[steps, N, d]``."""
+    def evaluate(
+        self,
+        positions: npt.ArrayLike,
+        particle_type: npt.ArrayLike,
+        short_rollout: int = 20,
+        emd_cost: str = "sqeuclidean",
+        sinkhorn_epsilon: float = 1e-4,
+        sinkhorn_every: int = 100,
+        density_radius: Optional[float] = None,
+    ) -> Dict[str, Any]:
+        """Evaluates the model on one trajectory ``[T, N, d]`` as ``phi eval`` does: a dict with
+        ``mse_acc1``, ``mse20``, ``mse400``, ``emd``, ``sinkhorn``, ``kinetic_energy_error``,
+        ``density_ratio``, ``failed_step`` and the per-frame ``curves`` (``None`` for a metric
+        of a rollout that blew up). ``density_radius`` defaults to the connectivity radius."""
 
 def train(
     out: Union[str, "os.PathLike[str]"],
