@@ -13,7 +13,7 @@ pip install --quiet -r phi-py/requirements-test.txt
 # PyTorch for `phi_rs.torch`'s tests (about 3 GB with the CUDA libraries it loads; see the file).
 # PHI_PY_TORCH=0 leaves it out, and those tests are skipped.
 if [ "${PHI_PY_TORCH:-1}" != 0 ]; then
-    pip install --quiet --no-deps -r phi-py/requirements-torch.txt
+    pip install --quiet --no-deps --no-cache-dir -r phi-py/requirements-torch.txt
 fi
 # One target folder for the module and the `phi` binary: they share the compiled crates.
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$PWD/target}"
