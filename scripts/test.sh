@@ -9,7 +9,7 @@ bash scripts/setup-libtorch.sh >/dev/null
 log="$(mktemp)"
 trap 'rm -f "$log"' EXIT
 status=0
-cargo test --workspace --features tch "$@" 2>&1 | tee "$log" || status=$?
+cargo test --workspace --features tch --no-fail-fast "$@" 2>&1 | tee "$log" || status=$?
 # The Python module (phi-py/, outside the workspace): built and tested by pytest.
 bash scripts/test-python.sh 2>&1 | tee -a "$log" || status=$?
 # Cargo's `test result:` lines, and pytest's closing line (`=== 3 passed, 1 skipped in 2.0s ===`).
