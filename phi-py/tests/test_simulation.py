@@ -2,6 +2,7 @@
 arguments and errors, Ctrl-C inside a long step(n), and two simulations at once."""
 
 import _thread
+import signal
 import threading
 
 import numpy as np
@@ -136,6 +137,9 @@ def test_bad_step_counts_are_refused_and_change_nothing():
 
 def test_ctrl_c_interrupts_a_long_step_at_a_completed_step():
     sim = phi_rs.Simulation(SCENE)
+    # Python's own Ctrl-C handler, even where the test runner was started with SIGINT ignored
+    # (a background job of a shell), in which case `interrupt_main` would do nothing.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(0.3, _thread.interrupt_main)
     timer.start()
     try:
@@ -143,6 +147,7 @@ def test_ctrl_c_interrupts_a_long_step_at_a_completed_step():
             sim.step(10**9)
     finally:
         timer.cancel()
+        signal.signal(signal.SIGINT, previous)
     done = sim.steps
     assert 0 < done < 10**9
     run = phi_rs.simulate(SCENE, steps=done)
