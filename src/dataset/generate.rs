@@ -3,13 +3,81 @@
 //! The library's documentation says how trajectories are drawn, sharded, resumed and replaced.
 
 use std::ops::ControlFlow;
+use std::path::PathBuf;
 
 use anyhow::{Result, bail};
+use clap::Args;
 use indicatif::ProgressBar;
-use phi_flip::RandomSceneParams;
+use phi_flip::{RandomSceneParams, SceneVariant};
 
-use super::cli::{GenerateArgs, SplitChoice, trajectories};
+use super::manifest::Shard;
 use super::{GenerateEvent, GenerateOptions, Split, TestScenes};
+
+/// `phi dataset generate --split`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SplitChoice {
+    /// Random scenes for training.
+    Train,
+    /// Random scenes from another seed.
+    Valid,
+    /// The hand-made test scenes.
+    Test,
+    /// Train, valid and test.
+    All,
+}
+
+/// `phi dataset generate`.
+#[derive(Debug, Args)]
+pub struct GenerateArgs {
+    /// The dataset directory.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// The split to make.
+    #[arg(long, value_enum, default_value_t = SplitChoice::All)]
+    pub split: SplitChoice,
+    /// Trajectories per split (default: train 2000, valid 20, test 10; test has at most 10;
+    /// --count before, deprecated).
+    #[arg(long, alias = "count")]
+    pub trajectories: Option<usize>,
+    /// The dataset seed; each split and trajectory derives its own from it.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// `obstacles`, or `walls` (walls as a ring of obstacle particles).
+    #[arg(long, default_value = "obstacles")]
+    pub variant: SceneVariant,
+    /// Table 5.1 as TOML (every key optional; unknown keys are errors).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Steps per trajectory (overrides the configuration; table: 400).
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// Worker threads (default: one per core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Make only the trajectories `i` with `i mod n = k` (0 <= k < n).
+    #[arg(long, default_value = "0/1", value_name = "K/N")]
+    pub shard: Shard,
+    /// Continue in a directory whose generator.json differs or is missing.
+    #[arg(long)]
+    pub resume: bool,
+    /// Delete trajectory files beyond --trajectories instead of refusing to run.
+    #[arg(long)]
+    pub prune: bool,
+    /// Replace a dataset this command wrote in --out: its files are removed and every
+    /// trajectory made again (a folder holding anything else is refused even then). Before,
+    /// --force deleted only the trajectories beyond --trajectories: that is --prune now.
+    #[arg(long, conflicts_with = "resume")]
+    pub force: bool,
+    /// Make the test split from the scene files (*.toml) of this folder, in name order, instead
+    /// of the ten built-in ones; they share one domain size and time step, which become the
+    /// dataset's. Only with --split test.
+    #[arg(long, value_name = "DIR")]
+    pub scenes: Option<PathBuf>,
+    /// Stored units per cell [default: 0.8 / the longest side, which maps the domain onto
+    /// [0.1, 0.9]]; 0.025 keeps the thesis' scale (x / 40 + 0.1) on larger domains.
+    #[arg(long, value_name = "S")]
+    pub position_scale: Option<f64>,
+}
 
 /// Runs `phi dataset generate` and prints a summary.
 ///
@@ -146,4 +214,13 @@ pub fn options(args: &GenerateArgs) -> Result<GenerateOptions> {
         position_scale: args.position_scale,
         memory_limit,
     })
+}
+
+/// "1 trajectory", "2 trajectories".
+pub fn trajectories(count: usize) -> String {
+    if count == 1 {
+        "1 trajectory".to_string()
+    } else {
+        format!("{count} trajectories")
+    }
 }
