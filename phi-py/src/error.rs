@@ -82,6 +82,9 @@ pub enum Error {
     /// The dataset reader's errors.
     #[error(transparent)]
     Data(#[from] phi_gns::data::DataError),
+    /// Dataset generation's errors.
+    #[error(transparent)]
+    Generate(#[from] phi_dataset::DatasetError),
     /// The GNS model's errors.
     #[error(transparent)]
     Model(#[from] phi_gns::model::ModelError),
@@ -123,7 +126,7 @@ impl From<Error> for PyErr {
         match error {
             Error::Flip(phi_flip::FlipError::Scene { .. }) => SceneError::new_err(message),
             Error::Flip(_) => SimulationError::new_err(message),
-            Error::Data(_) => DatasetError::new_err(message),
+            Error::Data(_) | Error::Generate(_) => DatasetError::new_err(message),
             Error::Model(_) => ModelError::new_err(message),
             Error::Train(phi_gns::train::TrainError::Data(_)) => DatasetError::new_err(message),
             Error::Train(phi_gns::train::TrainError::Model(_)) => ModelError::new_err(message),

@@ -20,6 +20,7 @@ mod backend;
 mod dataset;
 mod emd;
 mod error;
+mod generate;
 #[cfg(feature = "burn")]
 mod gradient;
 mod metrics;
@@ -38,6 +39,7 @@ fn _phi_rs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("BACKENDS", backend::available())?;
     m.add_function(wrap_pyfunction!(simulate::simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(generate::generate_dataset, m)?)?;
     m.add_function(wrap_pyfunction!(emd::emd, m)?)?;
     m.add_function(wrap_pyfunction!(metrics::sinkhorn, m)?)?;
     m.add_function(wrap_pyfunction!(metrics::position_mse, m)?)?;

@@ -32,6 +32,25 @@ class TrainingError(PhiError):
 class PointSetError(PhiError):
     """Point sets that a distance cannot compare."""
 
+def generate_dataset(
+    out: Union[str, os.PathLike[str]],
+    split: str = "all",
+    trajectories: Optional[int] = None,
+    seed: int = 0,
+    variant: str = "obstacles",
+    steps: Optional[int] = None,
+    threads: Optional[int] = None,
+    shard: Tuple[int, int] = (0, 1),
+    resume: bool = False,
+    prune: bool = False,
+    force: bool = False,
+    progress: Optional[Callable[[int, int], object]] = None,
+) -> Dict[str, float]:
+    """Simulates a dataset of random FLIP scenes (table 5.1) into ``out`` as ``phi dataset
+    generate`` does, byte for byte; ``progress(done, total)`` after each trajectory (an
+    exception in it stops the run, keeping the finished files). Returns ``written``,
+    ``skipped``, ``remade`` and ``seconds``. Raises ``DatasetError``."""
+
 def simulate(
     scene: Union[str, "os.PathLike[str]"],
     steps: Optional[int] = None,
