@@ -438,33 +438,7 @@ impl Model {
         steps: Option<usize>,
         start: Option<usize>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (shape, values) =
-            host_array::<f32>(positions, "float32", Area::Model, "rollout: positions")?;
-        let (type_shape, types) = host_array::<i64>(
-            particle_type,
-            "int64",
-            Area::Model,
-            "rollout: particle_type",
-        )?;
-        let [frames, n, d] = shape[..] else {
-            return Err(Error::argument(
-                Area::Model,
-                "rollout: positions",
-                format!("shape {}: expected [T, N, d]", shape_text(&shape)),
-            )
-            .into());
-        };
-        if type_shape != [n] {
-            return Err(Error::argument(
-                Area::Model,
-                "rollout: particle_type",
-                format!(
-                    "shape {}: expected ({n},), one type per particle of positions",
-                    shape_text(&type_shape)
-                ),
-            )
-            .into());
-        }
+        let (frames, n, d, values, types) = trajectory_arrays(positions, particle_type, "rollout")?;
         let c = self.input_velocities();
         let start = start.unwrap_or(c);
         let steps = steps.unwrap_or_else(|| frames.saturating_sub(start + 1));
@@ -533,30 +507,7 @@ impl Model {
             )
             .into());
         }
-        let (shape, values) =
-            host_array::<f32>(positions, "float32", Area::Model, "evaluate: positions")?;
-        let (type_shape, types) = host_array::<i64>(
-            particle_type,
-            "int64",
-            Area::Model,
-            "evaluate: particle_type",
-        )?;
-        let [_, n, d] = shape[..] else {
-            return Err(Error::argument(
-                Area::Model,
-                "evaluate: positions",
-                format!("shape {}: expected [T, N, d]", shape_text(&shape)),
-            )
-            .into());
-        };
-        if type_shape != [n] {
-            return Err(Error::argument(
-                Area::Model,
-                "evaluate: particle_type",
-                format!("shape {}: expected ({n},)", shape_text(&type_shape)),
-            )
-            .into());
-        }
+        let (_, _, d, values, types) = trajectory_arrays(positions, particle_type, "evaluate")?;
         let mut options =
             EvalOptions::new(density_radius.unwrap_or(self.spec().config.connectivity_radius));
         options.short_rollout = short_rollout;
@@ -599,4 +550,38 @@ impl From<Gns<phi_core::backend::burn::Burn>> for Loaded {
     fn from(model: Gns<phi_core::backend::burn::Burn>) -> Self {
         Loaded::Burn(Box::new(model))
     }
+}
+
+/// A trajectory from Python: positions float32 `[T, N, d]` and particle types int64 `[N]`, as
+/// `(T, N, d, positions, types)`; `function` names the call in the errors.
+#[allow(clippy::type_complexity)]
+fn trajectory_arrays(
+    positions: &Bound<'_, PyAny>,
+    particle_type: &Bound<'_, PyAny>,
+    function: &str,
+) -> PyResult<(usize, usize, usize, Vec<f32>, Vec<i64>)> {
+    let what = |name: &str| format!("{function}: {name}");
+    let (shape, values) = host_array::<f32>(positions, "float32", Area::Model, &what("positions"))?;
+    let (type_shape, types) =
+        host_array::<i64>(particle_type, "int64", Area::Model, &what("particle_type"))?;
+    let [frames, n, d] = shape[..] else {
+        return Err(Error::argument(
+            Area::Model,
+            what("positions"),
+            format!("shape {}: expected [T, N, d]", shape_text(&shape)),
+        )
+        .into());
+    };
+    if type_shape != [n] {
+        return Err(Error::argument(
+            Area::Model,
+            what("particle_type"),
+            format!(
+                "shape {}: expected ({n},), one type per particle of positions",
+                shape_text(&type_shape)
+            ),
+        )
+        .into());
+    }
+    Ok((frames, n, d, values, types))
 }
