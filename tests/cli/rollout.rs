@@ -643,28 +643,37 @@ fn rollout_refuses_foreign_outputs_and_missing_trajectories() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+/// The tiny 2D dataset in `dir/data` and a model in `dir/model` of single dense layers (so that
+/// nothing between an overflow and the output is a ReLU, which may map NaN to 0 as f32::max
+/// does) whose tensors `replace` returns replaced.
+fn doctored_model(
+    dir: &Path,
+    replace: impl Fn(&str, &Tensor<NdArray>) -> Option<Tensor<NdArray>>,
+) -> (std::path::PathBuf, std::path::PathBuf) {
+    let (data, model) = (dir.join("data"), dir.join("model"));
+    tiny_dataset(&data, 2, [0.1, 0.9], Variant::Obstacles);
+    ok(init(&data, &model, &["--hidden-layers", "0"]));
+    let gns = load_model::<NdArray>(&model, &Default::default()).unwrap();
+    let params = gns
+        .params()
+        .map(|name, t| replace(name, t).unwrap_or_else(|| t.clone()));
+    save_model(&model, &gns.with_params(params).unwrap()).unwrap();
+    (data, model)
+}
+
 #[test]
 fn a_diverging_model_stops_with_the_frames_before() {
     let dir = scratch("rollout-diverging");
-    let data = dir.join("data");
-    tiny_dataset(&data, 2, [0.1, 0.9], Variant::Obstacles);
-    let model = dir.join("model");
-    // Single dense layers, so that nothing between the overflow and the output is a ReLU (which
-    // may map NaN to 0, as f32::max does).
-    ok(init(&data, &model, &["--hidden-layers", "0"]));
     // A decoder bias near the largest f32 throws the liquid ~1e35 units in the first step (still
     // finite); the next step's velocities overflow the node encoder, whose weights are all 1e3.
-    let device = Default::default();
-    let gns = load_model::<NdArray>(&model, &device).unwrap();
-    let params = gns.params().map(|name, t| {
-        let fill = |v: f32| Tensor::from_vec(vec![v; t.numel()], &t.shape(), &device).unwrap();
+    let (data, model) = doctored_model(&dir, |name, t| {
+        let fill = |v: f32| Tensor::from_vec(vec![v; t.numel()], &t.shape(), &t.device()).unwrap();
         match name {
-            "decoder.0.bias" => fill(3e38),
-            "encoder.node.0.weight" => fill(1e3),
-            _ => t.clone(),
+            "decoder.0.bias" => Some(fill(3e38)),
+            "encoder.node.0.weight" => Some(fill(1e3)),
+            _ => None,
         }
     });
-    save_model(&model, &gns.with_params(params).unwrap()).unwrap();
 
     let out = dir.join("out");
     let stderr = failed(rollout(&model, &data, &out, &["--checkpoint-every", "1"]));
@@ -696,19 +705,12 @@ fn a_diverging_model_stops_with_the_frames_before() {
 #[test]
 fn clamped_walls_keep_a_sinking_model_in_the_box() {
     let dir = scratch("rollout-walls");
-    let data = dir.join("data");
-    tiny_dataset(&data, 2, [0.1, 0.9], Variant::Obstacles);
-    let model = dir.join("model");
-    ok(init(&data, &model, &["--hidden-layers", "0"]));
     // A decoder bias of −200 standard deviations along the vertical axis: the liquid falls
     // through the floor (y = 0.1) within the trajectory's four predicted steps.
-    let device = Default::default();
-    let gns = load_model::<NdArray>(&model, &device).unwrap();
-    let params = gns.params().map(|name, t| match name {
-        "decoder.0.bias" => Tensor::from_vec(vec![0.0, -200.0], &t.shape(), &device).unwrap(),
-        _ => t.clone(),
+    let (data, model) = doctored_model(&dir, |name, t| {
+        (name == "decoder.0.bias")
+            .then(|| Tensor::from_vec(vec![0.0, -200.0], &t.shape(), &t.device()).unwrap())
     });
-    save_model(&model, &gns.with_params(params).unwrap()).unwrap();
     let liquid_y = |out: &Path| -> Vec<f32> {
         let arrays = read_npz(out.join("test_0/rollout.npz")).unwrap();
         let (p, types) = (
