@@ -4,9 +4,10 @@ use std::path::{Path, PathBuf};
 
 use phi_core::Tensor;
 use phi_gns::data::{Trajectory, Variant, read_metadata};
+use phi_gns::eval::metrics::Container;
 use phi_gns::eval::{EmdCost, EvalOptions, evaluate_trajectory};
 use phi_gns::model::{
-    Gns, GnsConfig, GnsKernels, GraphBatch, MODEL_FILE, ModelSpec, WEIGHTS_FILE, load_model,
+    Gns, GnsConfig, GnsKernels, GraphBatch, MODEL_FILE, ModelSpec, WEIGHTS_FILE, Walls, load_model,
     save_model,
 };
 use phi_gns::rollout::{Rollout, RolloutRange, input_window, rollout_positions};
@@ -166,6 +167,72 @@ impl Model {
     }
 }
 
+/// The walls a Python caller names: `"open"` or `"clamp"`.
+fn parse_walls(name: &str, what: &str) -> Result<Walls, Error> {
+    match name {
+        "open" => Ok(Walls::Open),
+        "clamp" => Ok(Walls::Clamp),
+        other => Err(Error::argument(
+            Area::Model,
+            what,
+            format!("'{other}' is not a kind of walls (use 'open' or 'clamp')"),
+        )),
+    }
+}
+
+/// The container of `Model.evaluate`'s plausibility metrics from its `bounds` (`[dim]` pairs
+/// `(min, max)`) and `cell_size`: both or neither.
+fn evaluation_container(
+    bounds: Option<Vec<Vec<f64>>>,
+    cell_size: Option<f64>,
+    dim: usize,
+) -> Result<Option<Container>, Error> {
+    let argument = |name: &str, reason: String| {
+        Error::argument(Area::Model, format!("evaluate: {name}"), reason)
+    };
+    let (bounds, cell_size) = match (bounds, cell_size) {
+        (None, None) => return Ok(None),
+        (Some(bounds), Some(cell_size)) => (bounds, cell_size),
+        (Some(_), None) => return Err(argument("cell_size", "must be given with bounds".into())),
+        (None, Some(_)) => return Err(argument("bounds", "must be given with cell_size".into())),
+    };
+    if bounds.len() != dim {
+        return Err(argument(
+            "bounds",
+            format!(
+                "{} pairs for a {dim}-dimensional model: one (min, max) per axis",
+                bounds.len()
+            ),
+        ));
+    }
+    let mut pairs = Vec::with_capacity(dim);
+    for (axis, pair) in bounds.iter().enumerate() {
+        let &[lo, hi] = pair.as_slice() else {
+            return Err(argument(
+                "bounds",
+                format!("axis {axis} has {} values: expected (min, max)", pair.len()),
+            ));
+        };
+        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+            return Err(argument(
+                "bounds",
+                format!("axis {axis} is ({lo}, {hi}): must be finite with min < max"),
+            ));
+        }
+        pairs.push([lo, hi]);
+    }
+    if !(cell_size.is_finite() && cell_size > 0.0) {
+        return Err(argument(
+            "cell_size",
+            format!("{cell_size}: must be positive and finite"),
+        ));
+    }
+    Ok(Some(Container {
+        bounds: pairs,
+        cell_size,
+    }))
+}
+
 #[pymethods]
 impl Model {
     /// Loads the model in directory ``dir`` on ``backend`` (``"ndarray"`` or ``"burn"``).
@@ -318,6 +385,36 @@ impl Model {
         self.spec().config.input_velocities
     }
 
+    /// What the model's rollouts do at the domain's walls: ``"open"`` (predictions taken as
+    /// they are) or ``"clamp"`` (each prediction clamped into the box of the model's bounds,
+    /// as FLIP keeps its particles inside the domain).
+    #[getter]
+    fn walls(&self) -> &'static str {
+        match self.spec().config.walls {
+            Walls::Open => "open",
+            Walls::Clamp => "clamp",
+        }
+    }
+
+    /// The same model (the same weights, on the same backend) whose rollouts have the walls
+    /// ``walls`` (``"open"`` or ``"clamp"``). The network is unchanged: with ``"clamp"``,
+    /// ``predict`` is the open model's prediction clamped into the box.
+    ///
+    /// Raises:
+    ///     ModelError: an unknown kind of walls.
+    fn with_walls(&self, walls: &str) -> PyResult<Model> {
+        let walls = parse_walls(walls, "with_walls")?;
+        let inner = match &self.inner {
+            Loaded::Ndarray(m) => Loaded::Ndarray(Box::new(m.with_walls(walls))),
+            #[cfg(feature = "burn")]
+            Loaded::Burn(m) => Loaded::Burn(Box::new(m.with_walls(walls))),
+        };
+        Ok(Model {
+            inner,
+            dir: self.dir.clone(),
+        })
+    }
+
     /// The content of ``model.json`` as a dict.
     #[getter]
     fn spec_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
@@ -457,7 +554,11 @@ impl Model {
     /// ``short_rollout`` steps from frames ``C, C + 20, …``), ``mse400`` (the full rollout from
     /// frame ``C``), ``emd``, ``sinkhorn``, ``kinetic_energy_error``, ``density_ratio``,
     /// ``failed_step`` and the per-frame ``curves``; a metric of a rollout that blew up is
-    /// ``None``.
+    /// ``None``. With ``bounds`` and ``cell_size`` (the container: a dataset's
+    /// ``metadata["bounds"]`` and ``metadata["position_scale"]``) it adds ``plausibility``
+    /// (the fractions of the liquid's particle-frames ``outside`` the domain and
+    /// ``inside_obstacles``, ``final_density_ratio``, ``late_kinetic_energy_ratio``,
+    /// ``final_centre_distance_cells``) and ``plausible``, the verdict of ``phi eval``.
     ///
     /// Args:
     ///     positions: float32 ``[T, N, d]`` in stored units (a dataset trajectory).
@@ -468,13 +569,16 @@ impl Model {
     ///         (0: none).
     ///     density_radius: the radius of the density's neighbour counts; ``None`` is the
     ///         model's connectivity radius.
+    ///     bounds: ``(min, max)`` per axis, stored units: the domain the liquid must stay in.
+    ///     cell_size: the side of a grid cell, stored units (obstacle particles sit one at the
+    ///         centre of each obstacle cell).
     ///
     /// Raises:
     ///     ModelError: arrays that do not fit the model, a trajectory too short for a window,
-    ///         one without liquid.
+    ///         one without liquid, a container that is not one.
     ///
     /// The GIL is released while it runs.
-    #[pyo3(signature = (positions, particle_type, short_rollout = 20, emd_cost = "sqeuclidean", sinkhorn_epsilon = 1e-4, sinkhorn_every = 100, density_radius = None))]
+    #[pyo3(signature = (positions, particle_type, short_rollout = 20, emd_cost = "sqeuclidean", sinkhorn_epsilon = 1e-4, sinkhorn_every = 100, density_radius = None, bounds = None, cell_size = None))]
     #[allow(clippy::too_many_arguments)] // Python's keyword arguments
     fn evaluate<'py>(
         &self,
@@ -486,6 +590,8 @@ impl Model {
         sinkhorn_epsilon: f32,
         sinkhorn_every: usize,
         density_radius: Option<f64>,
+        bounds: Option<Vec<Vec<f64>>>,
+        cell_size: Option<f64>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let ground_cost = match emd_cost {
             "sqeuclidean" => EmdCost::SquaredEuclidean,
@@ -514,13 +620,21 @@ impl Model {
         options.ground_cost = ground_cost;
         options.sinkhorn_epsilon = sinkhorn_epsilon;
         options.sinkhorn_every = sinkhorn_every;
+        options.container = evaluation_container(bounds, cell_size, self.dim())?;
         let text = detached(py, || {
             let trajectory = Trajectory::new(d, values, types, 0, 0)
                 .map_err(|e| Error::argument(Area::Model, "evaluate: trajectory", e.to_string()))?;
             let evaluation = on_model!(&self.inner, m => evaluate_on(m, &trajectory, &options))?;
-            serde_json::to_string(&evaluation).map_err(|e| {
+            let unwritable = |e: serde_json::Error| {
                 Error::argument(Area::Model, "evaluate", format!("cannot be written: {e}"))
-            })
+            };
+            let mut value = serde_json::to_value(&evaluation).map_err(unwritable)?;
+            if options.container.is_some() {
+                value["plausible"] = serde_json::Value::from(
+                    evaluation.plausibility.as_ref().map(|p| p.is_plausible()),
+                );
+            }
+            serde_json::to_string(&value).map_err(unwritable)
         })?;
         py.import("json")?.call_method1("loads", (text,))
     }

@@ -223,3 +223,82 @@ def test_evaluate_agrees_with_rollout_and_the_metrics(model_dir, dataset_dir):
     assert ev["mse20"] == pytest.approx(np.mean(short), rel=1e-12)
     with pytest.raises(phi_rs.ModelError, match="emd_cost"):
         model.evaluate(positions, types, emd_cost="manhattan")
+    assert "plausibility" not in ev and "plausible" not in ev
+
+
+def swept_left(positions, types, cells_per_frame):
+    """The trajectory with its liquid carried left by `cells_per_frame` more every frame: it
+    reaches the left wall within a few frames and, rolled out with open walls, goes through."""
+    swept = positions.copy()
+    frames = np.arange(positions.shape[0], dtype=np.float32)[:, None]
+    swept[:, types == 1, 0] -= cells_per_frame * frames
+    return swept
+
+
+def test_clamped_walls_keep_the_rollout_in_the_box(model_dir, dataset_dir):
+    ds = phi_rs.Dataset(dataset_dir)
+    cell = ds.metadata["position_scale"]
+    positions, types = ds["train", 0]
+    swept = swept_left(positions, types, 4 * cell)
+    model = phi_rs.Model.load(model_dir)
+    assert model.walls == "open"
+    clamped = model.with_walls("clamp")
+    assert clamped.walls == "clamp" and model.walls == "open"
+    liquid = types == 1
+    open_rollout = model.rollout(swept, types)[:, liquid]
+    clamped_rollout = clamped.rollout(swept, types)[:, liquid]
+    lo, hi = np.array(ds.metadata["bounds"], dtype=np.float32).T
+    outside = ((open_rollout < lo) | (open_rollout > hi)).any(axis=(1, 2))
+    assert outside.any()
+    assert ((clamped_rollout >= lo) & (clamped_rollout <= hi)).all()
+    # The rollouts agree until the open one first leaves the box; at that step the clamped one
+    # is the open one's prediction clamped into the box: stopped on the wall, not short of it.
+    k = int(np.argmax(outside))
+    assert np.array_equal(clamped_rollout[:k], open_rollout[:k])
+    assert np.array_equal(clamped_rollout[k], np.clip(open_rollout[k], lo, hi))
+    # One step is the open model's, clamped into the box.
+    c = model.input_velocities
+    assert np.array_equal(clamped.predict(swept[:c + 1], types),
+                          np.clip(model.predict(swept[:c + 1], types), lo, hi))
+    with pytest.raises(phi_rs.ModelError, match="'bouncy' is not a kind of walls"):
+        model.with_walls("bouncy")
+
+
+def test_evaluate_with_a_container_counts_what_leaves_it(model_dir, dataset_dir):
+    ds = phi_rs.Dataset(dataset_dir)
+    bounds, cell = ds.metadata["bounds"], ds.metadata["position_scale"]
+    positions, types = ds["train", 0]
+    swept = swept_left(positions, types, 4 * cell)
+    model = phi_rs.Model.load(model_dir)
+    ev = model.evaluate(swept, types, sinkhorn_every=0, bounds=bounds, cell_size=cell)
+    plausibility = ev["plausibility"]
+    # The fractions of the liquid's particle-frames outside the domain and inside a cell
+    # that holds an obstacle particle, counted here from the rollout.
+    c, liquid = model.input_velocities, types == 1
+    predicted = model.rollout(swept, types)
+    lo = np.array([b[0] for b in bounds])
+    hi = np.array([b[1] for b in bounds])
+    outside = ((predicted[:, liquid] < lo) | (predicted[:, liquid] > hi)).any(axis=-1)
+    assert outside.mean() > 0
+    assert plausibility["outside"] == pytest.approx(outside.mean(), rel=1e-12)
+    inside = 0
+    for frame, is_out in zip(predicted, outside):
+        cells = np.floor((frame.astype(np.float64) - lo) / cell).astype(np.int64)
+        solid = {tuple(x) for x in cells[~liquid]}
+        inside += sum(tuple(x) in solid for x, o in zip(cells[liquid], is_out) if not o)
+    assert plausibility["inside_obstacles"] == pytest.approx(inside / outside.size, rel=1e-12)
+    # The centre of mass at the end, in cells, and the verdict.
+    centre = predicted[-1, liquid].astype(np.float64).mean(axis=0)
+    true_centre = swept[-1, liquid].astype(np.float64).mean(axis=0)
+    assert plausibility["final_centre_distance_cells"] == pytest.approx(
+        np.linalg.norm(centre - true_centre) / cell, rel=1e-9)
+    assert ev["plausible"] is False
+    assert ev["start"] == c
+    with pytest.raises(phi_rs.ModelError, match="cell_size: must be given with bounds"):
+        model.evaluate(swept, types, bounds=bounds)
+    with pytest.raises(phi_rs.ModelError, match="bounds: 1 pairs for a 2-dimensional model"):
+        model.evaluate(swept, types, bounds=bounds[:1], cell_size=cell)
+    with pytest.raises(phi_rs.ModelError, match=r"axis 1 is \(1, 0\)"):
+        model.evaluate(swept, types, bounds=[bounds[0], (1, 0)], cell_size=cell)
+    with pytest.raises(phi_rs.ModelError, match="axis 0 has 3 values"):
+        model.evaluate(swept, types, bounds=[(0, 1, 2), bounds[1]], cell_size=cell)

@@ -1,7 +1,7 @@
 """phi from Python: FLIP liquid simulation, GNS datasets and models, point-set distances."""
 
 import os
-from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple, Union
+from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -213,6 +213,14 @@ class Model:
     @property
     def input_velocities(self) -> int: ...
     @property
+    def walls(self) -> str:
+        """``"open"`` or ``"clamp"``: what the model's rollouts do at the domain's walls."""
+    def with_walls(self, walls: str) -> "Model":
+        """The same model whose rollouts have the walls ``walls`` (``"open"``: predictions
+        taken as they are; ``"clamp"``: each clamped into the box of the model's bounds, as
+        FLIP keeps its particles in the domain). The network is unchanged: with ``"clamp"``,
+        ``predict`` is the open model's prediction clamped into the box."""
+    @property
     def spec_dict(self) -> Dict[str, Any]:
         """The content of ``model.json``."""
     def predict(
@@ -242,11 +250,17 @@ class Model:
         sinkhorn_epsilon: float = 1e-4,
         sinkhorn_every: int = 100,
         density_radius: Optional[float] = None,
+        bounds: Optional[Sequence[Tuple[float, float]]] = None,
+        cell_size: Optional[float] = None,
     ) -> Dict[str, Any]:
         """Evaluates the model on one trajectory ``[T, N, d]`` as ``phi eval`` does: a dict with
         ``mse_acc1``, ``mse20``, ``mse400``, ``emd``, ``sinkhorn``, ``kinetic_energy_error``,
         ``density_ratio``, ``failed_step`` and the per-frame ``curves`` (``None`` for a metric
-        of a rollout that blew up). ``density_radius`` defaults to the connectivity radius."""
+        of a rollout that blew up). ``density_radius`` defaults to the connectivity radius.
+        With ``bounds`` and ``cell_size`` (a dataset's ``metadata["bounds"]`` and
+        ``metadata["position_scale"]``) it adds ``plausibility`` (``outside``,
+        ``inside_obstacles``, ``final_density_ratio``, ``late_kinetic_energy_ratio``,
+        ``final_centre_distance_cells``) and ``plausible``, ``phi eval``'s verdict."""
 
 def train(
     out: Union[str, "os.PathLike[str]"],
