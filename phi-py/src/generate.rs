@@ -1,11 +1,12 @@
-//! `phi_rs.generate_dataset`: `phi dataset generate` from Python (phi-dataset's `generate`),
-//! with a progress callback.
+//! `phi_rs.generate_dataset` and `phi_rs.merge_dataset`: `phi dataset generate` (with a
+//! progress callback) and `phi dataset merge` from Python (phi-dataset's `generate` and
+//! `merge`).
 
 use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::sync::Mutex;
 
-use phi_dataset::{GenerateEvent, GenerateOptions, Shard, Split, generate};
+use phi_dataset::{GenerateEvent, GenerateOptions, Shard, Split, generate, merge};
 use phi_flip::SceneVariant;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -123,5 +124,37 @@ pub fn generate_dataset(
     dict.set_item("skipped", summary.skipped)?;
     dict.set_item("remade", summary.remade)?;
     dict.set_item("seconds", summary.seconds)?;
+    Ok(dict.unbind())
+}
+
+/// Joins shard directories that ``generate_dataset(shard=(k, n))`` wrote with one configuration
+/// into the dataset ``out``, as ``phi dataset merge`` does: the trajectory files are hard-linked
+/// (copied across file systems), and the dataset equals the one ``generate_dataset`` writes
+/// without shards, byte for byte. A dataset already at ``out`` is replaced only with
+/// ``force=True``.
+///
+/// Args:
+///     out: the dataset directory (not one of the shards).
+///     shards: the shard directories, all ``n`` of them, in any order.
+///     force: replace a dataset at ``out``.
+///
+/// Returns:
+///     A dict: ``counts`` (trajectories per split) and ``files`` (files linked or copied).
+///
+/// Raises:
+///     DatasetError: shards of different configurations, a missing trajectory, an output that
+///         is a shard or holds something else.
+#[pyfunction]
+#[pyo3(signature = (out, shards, force = false))]
+pub fn merge_dataset(
+    py: Python<'_>,
+    out: PathBuf,
+    shards: Vec<PathBuf>,
+    force: bool,
+) -> PyResult<Py<PyDict>> {
+    let summary = detached(py, || Ok(merge(&out, &shards, force)?))?;
+    let dict = PyDict::new(py);
+    dict.set_item("counts", summary.counts)?;
+    dict.set_item("files", summary.files)?;
     Ok(dict.unbind())
 }

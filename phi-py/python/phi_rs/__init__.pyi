@@ -51,6 +51,16 @@ def generate_dataset(
     exception in it stops the run, keeping the finished files). Returns ``written``,
     ``skipped``, ``remade`` and ``seconds``. Raises ``DatasetError``."""
 
+def merge_dataset(
+    out: Union[str, os.PathLike[str]],
+    shards: Sequence[Union[str, os.PathLike[str]]],
+    force: bool = False,
+) -> Dict[str, Any]:
+    """Joins the shard directories of ``generate_dataset(shard=(k, n))`` into the dataset
+    ``out`` as ``phi dataset merge`` does (files hard-linked; the dataset of an unsharded run,
+    byte for byte). Returns ``counts`` (trajectories per split) and ``files``. Raises
+    ``DatasetError``."""
+
 def simulate(
     scene: Union[str, "os.PathLike[str]"],
     steps: Optional[int] = None,
