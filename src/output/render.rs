@@ -285,69 +285,23 @@ pub fn render_frame(
     obstacle_cells: Option<&[bool]>,
     style: &FrameStyle,
 ) -> Result<RgbImage, OutputError> {
-    let bad = |msg: String| Err(OutputError::InvalidInput(format!("render_frame: {msg}")));
-    if dim != 2 && dim != 3 {
-        return bad(format!("dim must be 2 or 3, not {dim}"));
-    }
-    if !positions.len().is_multiple_of(dim) {
-        return bad(format!(
-            "{} coordinates are not a multiple of dim {dim}",
-            positions.len()
-        ));
-    }
-    let n = positions.len() / dim;
-    if kinds.len() != n {
-        return bad(format!("{} kinds for {n} particles", kinds.len()));
-    }
-    if domain_lower.len() != dim || domain_upper.len() != dim || resolution.len() != dim {
-        return bad(format!(
-            "domain corners ({} and {} values) and resolution ({} values) need dim = {dim} values",
-            domain_lower.len(),
-            domain_upper.len(),
-            resolution.len()
-        ));
-    }
-    for axis in 0..dim {
-        let (lo, hi) = (domain_lower[axis], domain_upper[axis]);
-        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-            return bad(format!(
-                "empty or non-finite domain [{lo}, {hi}] on axis {axis}"
-            ));
-        }
-        if resolution[axis] == 0 {
-            return bad(format!("resolution is 0 on axis {axis}"));
-        }
-    }
-    let cells: Option<usize> = resolution.iter().try_fold(1usize, |a, &r| a.checked_mul(r));
-    if let Some(obstacles) = obstacle_cells
-        && Some(obstacles.len()) != cells
-    {
-        return bad(format!(
-            "{} obstacle flags for a grid of {resolution:?} cells",
-            obstacles.len()
-        ));
-    }
-    if style.pixels_per_cell == 0 {
-        return bad("pixels_per_cell is 0".into());
-    }
-    let ppc = u64::from(style.pixels_per_cell);
-    let frame = u64::from(style.frame_width);
-    let inner_w = resolution[0] as u64 * ppc;
-    let inner_h = resolution[1] as u64 * ppc;
-    let width = inner_w + 2 * frame;
-    let height = inner_h + 2 * frame;
-    if width.saturating_mul(height) > MAX_PIXELS {
-        return bad(format!("a {width}x{height} picture is too large"));
-    }
-    // Both fit in u32 since their product is at most 2^28.
-    let (width, height, frame, inner_w, inner_h) = (
-        width as u32,
-        height as u32,
-        frame as u32,
-        inner_w as u32,
-        inner_h as u32,
-    );
-
+    let layout = FrameLayout::check(
+        positions.len(),
+        dim,
+        kinds.len(),
+        domain_lower,
+        domain_upper,
+        resolution,
+        obstacle_cells.map(<[bool]>::len),
+        style,
+    )?;
+    let FrameLayout {
+        width,
+        height,
+        frame,
+        inner_w,
+        inner_h,
+    } = layout;
     let mut image = RgbImage::new(width, height, style.background);
     image.fill_rect(0, 0, width, height, style.frame_color);
     image.fill_rect(
@@ -357,25 +311,12 @@ pub fn render_frame(
         frame + inner_h,
         style.background,
     );
-
     if let Some(obstacles) = obstacle_cells {
-        let (nx, ny) = (resolution[0], resolution[1]);
-        let nz = if dim == 3 { resolution[2] } else { 1 };
-        let ppc = style.pixels_per_cell;
-        for i in 0..nx {
-            for j in 0..ny {
-                let column = (i * ny + j) * nz;
-                if obstacles[column..column + nz].iter().any(|&s| s) {
-                    // Row j = 0 is the bottom of the domain.
-                    let x0 = frame + i as u32 * ppc;
-                    let y0 = frame + (ny - 1 - j) as u32 * ppc;
-                    image.fill_rect(x0, y0, x0 + ppc, y0 + ppc, style.obstacle_cell_color);
-                }
-            }
-        }
+        draw_obstacle_cells(&mut image, obstacles, resolution, frame, style);
     }
 
     // Far particles first, so that near ones are drawn over them.
+    let n = kinds.len();
     let mut order: Vec<usize> = (0..n).collect();
     if dim == 3 {
         order.sort_by(|&a, &b| positions[a * 3 + 2].total_cmp(&positions[b * 3 + 2]));
@@ -383,8 +324,12 @@ pub fn render_frame(
     let scale_x = inner_w as f32 / (domain_upper[0] - domain_lower[0]);
     let scale_y = inner_h as f32 / (domain_upper[1] - domain_lower[1]);
     let radius = (style.particle_radius * style.pixels_per_cell as f32).max(0.5);
-    let (px_min, px_max) = (frame as f32, (frame + inner_w) as f32);
-    let (py_min, py_max) = (frame as f32, (frame + inner_h) as f32);
+    let clip = [
+        frame as f32,
+        (frame + inner_w) as f32,
+        frame as f32,
+        (frame + inner_h) as f32,
+    ];
     for p in order {
         let x = &positions[p * dim..(p + 1) * dim];
         if x.iter().any(|c| !c.is_finite()) {
@@ -398,29 +343,147 @@ pub fn render_frame(
         }
         let cx = frame as f32 + (x[0] - domain_lower[0]) * scale_x;
         let cy = frame as f32 + (domain_upper[1] - x[1]) * scale_y;
-        // The pixels whose centres lie in the disc, clipped to the domain.
-        let x0 = (cx - radius).floor().max(px_min);
-        let x1 = (cx + radius).ceil().min(px_max);
-        let y0 = (cy - radius).floor().max(py_min);
-        let y1 = (cy + radius).ceil().min(py_max);
-        let mut py = y0;
-        while py < y1 {
-            let mut px = x0;
-            while px < x1 {
-                let (dx, dy) = (px + 0.5 - cx, py + 0.5 - cy);
-                if dx * dx + dy * dy <= radius * radius {
-                    image.set_pixel(px as u32, py as u32, color);
-                }
-                px += 1.0;
-            }
-            py += 1.0;
-        }
-        // However small the disc, the pixel under its centre is drawn.
-        if (px_min..px_max).contains(&cx) && (py_min..py_max).contains(&cy) {
-            image.set_pixel(cx as u32, cy as u32, color);
-        }
+        draw_disc(&mut image, [cx, cy], radius, clip, color);
     }
     Ok(image)
+}
+
+/// The size of a frame's picture: `width × height` pixels, the domain's `inner_w × inner_h`
+/// inside a border of `frame` pixels.
+#[derive(Debug, Clone, Copy)]
+struct FrameLayout {
+    width: u32,
+    height: u32,
+    frame: u32,
+    inner_w: u32,
+    inner_h: u32,
+}
+
+impl FrameLayout {
+    /// The layout of [`render_frame`]'s picture, after checking its input (`coordinates`
+    /// values, `kinds` particles, `obstacle_flags` cells when given).
+    #[allow(clippy::too_many_arguments)]
+    fn check(
+        coordinates: usize,
+        dim: usize,
+        kinds: usize,
+        domain_lower: &[f32],
+        domain_upper: &[f32],
+        resolution: &[usize],
+        obstacle_flags: Option<usize>,
+        style: &FrameStyle,
+    ) -> Result<Self, OutputError> {
+        let bad = |msg: String| Err(OutputError::InvalidInput(format!("render_frame: {msg}")));
+        if dim != 2 && dim != 3 {
+            return bad(format!("dim must be 2 or 3, not {dim}"));
+        }
+        if !coordinates.is_multiple_of(dim) {
+            return bad(format!(
+                "{coordinates} coordinates are not a multiple of dim {dim}"
+            ));
+        }
+        let n = coordinates / dim;
+        if kinds != n {
+            return bad(format!("{kinds} kinds for {n} particles"));
+        }
+        if domain_lower.len() != dim || domain_upper.len() != dim || resolution.len() != dim {
+            return bad(format!(
+                "domain corners ({} and {} values) and resolution ({} values) need dim = {dim} values",
+                domain_lower.len(),
+                domain_upper.len(),
+                resolution.len()
+            ));
+        }
+        for axis in 0..dim {
+            let (lo, hi) = (domain_lower[axis], domain_upper[axis]);
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return bad(format!(
+                    "empty or non-finite domain [{lo}, {hi}] on axis {axis}"
+                ));
+            }
+            if resolution[axis] == 0 {
+                return bad(format!("resolution is 0 on axis {axis}"));
+            }
+        }
+        let cells: Option<usize> = resolution.iter().try_fold(1usize, |a, &r| a.checked_mul(r));
+        if let Some(flags) = obstacle_flags
+            && Some(flags) != cells
+        {
+            return bad(format!(
+                "{flags} obstacle flags for a grid of {resolution:?} cells"
+            ));
+        }
+        if style.pixels_per_cell == 0 {
+            return bad("pixels_per_cell is 0".into());
+        }
+        let ppc = u64::from(style.pixels_per_cell);
+        let frame = u64::from(style.frame_width);
+        let inner_w = resolution[0] as u64 * ppc;
+        let inner_h = resolution[1] as u64 * ppc;
+        let width = inner_w + 2 * frame;
+        let height = inner_h + 2 * frame;
+        if width.saturating_mul(height) > MAX_PIXELS {
+            return bad(format!("a {width}x{height} picture is too large"));
+        }
+        // All fit in u32 since width times height is at most 2^28.
+        Ok(FrameLayout {
+            width: width as u32,
+            height: height as u32,
+            frame: frame as u32,
+            inner_w: inner_w as u32,
+            inner_h: inner_h as u32,
+        })
+    }
+}
+
+/// Fills the cells of the `resolution` grid whose column (in 3D: any cell along z) holds an
+/// obstacle; row 0 is the bottom of the domain.
+fn draw_obstacle_cells(
+    image: &mut RgbImage,
+    obstacles: &[bool],
+    resolution: &[usize],
+    frame: u32,
+    style: &FrameStyle,
+) {
+    let (nx, ny) = (resolution[0], resolution[1]);
+    let nz = resolution.get(2).copied().unwrap_or(1);
+    let ppc = style.pixels_per_cell;
+    for i in 0..nx {
+        for j in 0..ny {
+            let column = (i * ny + j) * nz;
+            if obstacles[column..column + nz].iter().any(|&s| s) {
+                let x0 = frame + i as u32 * ppc;
+                let y0 = frame + (ny - 1 - j) as u32 * ppc;
+                image.fill_rect(x0, y0, x0 + ppc, y0 + ppc, style.obstacle_cell_color);
+            }
+        }
+    }
+}
+
+/// Draws the pixels whose centres lie in the disc of `radius` around `centre`, clipped to
+/// `[x_min, x_max, y_min, y_max]`; however small the disc, the pixel under its centre is drawn.
+fn draw_disc(image: &mut RgbImage, centre: [f32; 2], radius: f32, clip: [f32; 4], color: [u8; 3]) {
+    let [cx, cy] = centre;
+    let [px_min, px_max, py_min, py_max] = clip;
+    let x0 = (cx - radius).floor().max(px_min);
+    let x1 = (cx + radius).ceil().min(px_max);
+    let y0 = (cy - radius).floor().max(py_min);
+    let y1 = (cy + radius).ceil().min(py_max);
+    let mut py = y0;
+    while py < y1 {
+        let mut px = x0;
+        while px < x1 {
+            let (dx, dy) = (px + 0.5 - cx, py + 0.5 - cy);
+            if dx * dx + dy * dy <= radius * radius {
+                image.set_pixel(px as u32, py as u32, color);
+            }
+            px += 1.0;
+        }
+        py += 1.0;
+    }
+    if (px_min..px_max).contains(&cx) && (py_min..py_max).contains(&cy) {
+        image.set_pixel(cx as u32, cy as u32, color);
+    }
 }
 
 /// Saves `image` as an 8-bit RGB PNG file, atomically (temporary file, sync, rename).
