@@ -84,7 +84,7 @@ impl<'m, B: GnsKernels> Rollout<'m, B> {
     ///
     /// # Errors
     /// [`ModelError::Input`] when `window` does not fit the model or `mask` the window.
-    pub fn with_mask(
+    pub(crate) fn with_mask(
         model: &'m Gns<B>,
         window: GraphBatch<B>,
         mask: &Tensor<B>,

@@ -8,7 +8,7 @@
 //!   liquid.
 //! - [`lagrangebench_metadata`] and [`export_lagrangebench_arrays`]: the parts of a
 //!   LagrangeBench export that need no HDF5 library. LagrangeBench reads `{split}.h5` with one
-//!   group per trajectory (`00000`, ...) holding `position` [T, N, D] and `particle_type` [N]
+//!   group per trajectory (`00000`, ...) holding `position` `[T, N, D]` and `particle_type` `[N]`
 //!   (FLUID 0, SOLID_WALL 1: [`LB_FLUID`], [`LB_SOLID_WALL`]); the arrays are written here as an
 //!   `.npz` archive in that layout, which the `phi` command turns into HDF5.
 //!

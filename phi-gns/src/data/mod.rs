@@ -113,7 +113,7 @@ pub fn trajectory_seed(split_seed: u64, index: usize) -> u64 {
 }
 
 /// The split names of the thesis' datasets, in the order they are usually listed.
-pub const SPLITS: [&str; 3] = ["train", "valid", "test"];
+pub(crate) const SPLITS: [&str; 3] = ["train", "valid", "test"];
 
 /// Errors of [`crate::data`]: each names the file (or the input) and what is wrong with it.
 #[derive(Debug, thiserror::Error)]

@@ -61,12 +61,12 @@ use super::{
 };
 
 /// DeepMind's particle type of kinematic (obstacle, boundary) particles.
-pub const DEEPMIND_KINEMATIC: i64 = 3;
+pub(crate) const DEEPMIND_KINEMATIC: i64 = 3;
 /// DeepMind's particle type of water.
-pub const DEEPMIND_WATER: i64 = 5;
+pub(crate) const DEEPMIND_WATER: i64 = 5;
 
 /// Our particle type ([`OBSTACLE`], [`LIQUID`]) as DeepMind's; `None` for other values.
-pub fn to_deepmind_type(t: i64) -> Option<i64> {
+pub(crate) fn to_deepmind_type(t: i64) -> Option<i64> {
     match t {
         OBSTACLE => Some(DEEPMIND_KINEMATIC),
         LIQUID => Some(DEEPMIND_WATER),
@@ -75,7 +75,7 @@ pub fn to_deepmind_type(t: i64) -> Option<i64> {
 }
 
 /// DeepMind's particle type as ours; `None` for types other than kinematic and water.
-pub fn from_deepmind_type(t: i64) -> Option<i64> {
+pub(crate) fn from_deepmind_type(t: i64) -> Option<i64> {
     match t {
         DEEPMIND_KINEMATIC => Some(OBSTACLE),
         DEEPMIND_WATER => Some(LIQUID),
@@ -157,7 +157,7 @@ impl RecordReader {
     }
 
     /// The number of the record the next [`RecordReader::next_record`] returns.
-    pub fn record_number(&self) -> u64 {
+    pub(crate) fn record_number(&self) -> u64 {
         self.record
     }
 
@@ -465,7 +465,7 @@ pub fn decode_sequence_example(
 
 /// Decodes one record into a trajectory with index `index` and the value of its `key` context
 /// feature, if it has one (any value: DeepMind's reader ignores it).
-pub fn decode_record(
+pub(crate) fn decode_record(
     bytes: &[u8],
     dim: usize,
     index: usize,

@@ -191,7 +191,7 @@ impl<B: phi_core::Backend> GraphBatch<B> {
     }
 
     /// The sender and receiver index tensors `[E]`.
-    pub fn edge_index(&self) -> (&IntTensor<B>, &IntTensor<B>) {
+    pub(crate) fn edge_index(&self) -> (&IntTensor<B>, &IntTensor<B>) {
         (&self.senders, &self.receivers)
     }
 

@@ -43,7 +43,7 @@ pub fn save_model<B: GnsKernels>(dir: &Path, model: &Gns<B>) -> Result<(), Model
 ///
 /// # Errors
 /// [`ModelError::File`] naming `path` if serialisation fails.
-pub fn weights_to_bytes<B: Backend>(
+pub(crate) fn weights_to_bytes<B: Backend>(
     params: &Parameters<B>,
     path: &Path,
 ) -> Result<Vec<u8>, ModelError> {
@@ -54,7 +54,7 @@ pub fn weights_to_bytes<B: Backend>(
 ///
 /// # Errors
 /// [`ModelError::File`] naming `path` if serialisation fails.
-pub fn tensors_to_bytes<'a, B: Backend>(
+pub(crate) fn tensors_to_bytes<'a, B: Backend>(
     tensors: impl IntoIterator<Item = (String, &'a Tensor<B>)>,
     path: &Path,
 ) -> Result<Vec<u8>, ModelError> {
@@ -111,7 +111,7 @@ pub fn load_model<B: GnsKernels>(dir: &Path, device: &B::Device) -> Result<Gns<B
 /// # Errors
 /// [`ModelError::File`] naming `path` for bytes that are not safetensors, or a tensor that is
 /// not `f32`.
-pub fn weights_from_bytes<B: Backend>(
+pub(crate) fn weights_from_bytes<B: Backend>(
     bytes: &[u8],
     path: &Path,
     device: &B::Device,

@@ -359,7 +359,7 @@ impl<B: GnsKernels> Gns<B> {
     ///
     /// # Errors
     /// Shape errors when `acceleration` is not `[N, dim]`.
-    pub fn normalise_acceleration(
+    pub(crate) fn normalise_acceleration(
         &self,
         acceleration: &Tensor<B>,
     ) -> Result<Tensor<B>, ModelError> {

@@ -208,7 +208,7 @@ impl<B: Backend> Parameters<B> {
     }
 
     /// The same values on another backend (through the host).
-    pub fn to_backend<C: Backend>(&self, device: &C::Device) -> Parameters<C> {
+    pub(crate) fn to_backend<C: Backend>(&self, device: &C::Device) -> Parameters<C> {
         Parameters {
             tensors: self
                 .tensors

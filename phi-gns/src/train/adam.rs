@@ -123,7 +123,7 @@ impl<B: Backend> Adam<B> {
     ///
     /// # Errors
     /// [`ModelError::Input`] when the moments do not have the same names and shapes.
-    pub fn restore(
+    pub(crate) fn restore(
         config: AdamConfig,
         step: u64,
         first: Parameters<B>,

@@ -36,7 +36,7 @@ impl WeightAverage {
     }
 
     /// The average `params` after `updates` updates, as a checkpoint holds it.
-    pub fn restore(decay: f64, params: Parameters<Host>, updates: u64) -> Self {
+    pub(crate) fn restore(decay: f64, params: Parameters<Host>, updates: u64) -> Self {
         WeightAverage {
             decay,
             updates,
@@ -45,7 +45,7 @@ impl WeightAverage {
     }
 
     /// The decay of the next update: `min(d, (1 + n) / (10 + n))`.
-    pub fn next_decay(&self) -> f64 {
+    pub(crate) fn next_decay(&self) -> f64 {
         let n = self.updates as f64;
         self.decay.min((1.0 + n) / (10.0 + n))
     }

@@ -24,24 +24,24 @@ use crate::model::files::{tensors_to_bytes, weights_from_bytes};
 use crate::model::{Gns, GnsKernels, Parameters, load_model, save_model};
 
 /// The folder of the checkpoints in a training directory.
-pub const CHECKPOINTS_DIR: &str = "checkpoints";
+pub(crate) const CHECKPOINTS_DIR: &str = "checkpoints";
 /// The folder of the best model in a training directory.
 pub const BEST_DIR: &str = "best";
 /// Adam's moments in a checkpoint.
-pub const OPTIMIZER_FILE: &str = "optimizer.safetensors";
+pub(crate) const OPTIMIZER_FILE: &str = "optimizer.safetensors";
 /// The state of a checkpoint, written last.
-pub const STATE_FILE: &str = "state.json";
+pub(crate) const STATE_FILE: &str = "state.json";
 /// What the best model was chosen by, in `best/`.
-pub const BEST_FILE: &str = "best.json";
+pub(crate) const BEST_FILE: &str = "best.json";
 /// The weight average of a checkpoint, a model directory.
-pub const AVERAGE_DIR: &str = "average";
+pub(crate) const AVERAGE_DIR: &str = "average";
 /// The value of [`CheckpointState::format`].
 pub const CHECKPOINT_FORMAT: &str = "phi-gns-checkpoint";
 
 /// The loss of the steps since the last row of `train.csv`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct LossAccumulator {
+pub(crate) struct LossAccumulator {
     /// The sum of the losses (in f64; JSON keeps it exactly).
     pub sum: f64,
     /// The number of steps summed.
@@ -56,7 +56,7 @@ impl LossAccumulator {
     }
 
     /// The mean loss, and a fresh accumulator.
-    pub fn take_mean(&mut self) -> f64 {
+    pub(crate) fn take_mean(&mut self) -> f64 {
         let mean = if self.steps == 0 {
             f64::NAN
         } else {
@@ -111,7 +111,7 @@ impl CheckpointState {
 }
 
 /// The directory of the checkpoint at `step` in the training directory `out`.
-pub fn checkpoint_dir(out: &Path, step: u64) -> PathBuf {
+pub(crate) fn checkpoint_dir(out: &Path, step: u64) -> PathBuf {
     out.join(CHECKPOINTS_DIR).join(format!("step-{step:010}"))
 }
 
@@ -128,7 +128,7 @@ fn error(path: &Path, reason: impl std::fmt::Display) -> TrainError {
 ///
 /// # Errors
 /// [`TrainError::Checkpoint`] or [`TrainError::Io`] naming the file that cannot be written.
-pub fn save_checkpoint<B: GnsKernels>(
+pub(crate) fn save_checkpoint<B: GnsKernels>(
     out: &Path,
     model: &Gns<B>,
     adam: &Adam<B>,
@@ -163,7 +163,7 @@ pub fn save_checkpoint<B: GnsKernels>(
 /// # Errors
 /// [`TrainError::Checkpoint`] when `state.json` counts updates but `average/` is missing or
 /// damaged, or does not fit `model`.
-pub fn load_average<B: GnsKernels>(
+pub(crate) fn load_average<B: GnsKernels>(
     dir: &Path,
     state: &CheckpointState,
     model: &Gns<B>,
@@ -194,7 +194,7 @@ pub fn load_average<B: GnsKernels>(
 /// # Errors
 /// [`TrainError::Checkpoint`] for a missing or damaged file, [`TrainError::Model`] for weights
 /// or moments that do not fit the model.
-pub fn load_checkpoint<B: GnsKernels>(
+pub(crate) fn load_checkpoint<B: GnsKernels>(
     dir: &Path,
     adam: AdamConfig,
     device: &B::Device,
@@ -297,7 +297,7 @@ pub fn prune_checkpoints(out: &Path, keep: usize) -> Result<(), TrainError> {
 ///
 /// # Errors
 /// [`TrainError::Checkpoint`] or [`TrainError::Io`] naming the file that cannot be written.
-pub fn save_best<B: GnsKernels>(
+pub(crate) fn save_best<B: GnsKernels>(
     out: &Path,
     model: &Gns<B>,
     best: &Best,

@@ -137,7 +137,7 @@ impl LossKind {
 
 impl TrainingSection {
     /// The error norm of the loss this section chooses.
-    pub fn error_norm(&self) -> ErrorNorm {
+    pub(crate) fn error_norm(&self) -> ErrorNorm {
         match self.loss {
             LossKind::Mse => ErrorNorm::Squared,
             LossKind::Huber => ErrorNorm::Huber {
@@ -364,7 +364,7 @@ impl TrainConfig {
     /// # Errors
     /// [`TrainError::Config`] when `model.boundary_features` does not fit the dataset's variant
     /// (`origin` names the preset), or the sizes make no valid model (naming the key).
-    pub fn model_spec(
+    pub(crate) fn model_spec(
         &self,
         metadata: &Metadata,
         metadata_path: &Path,
@@ -430,13 +430,13 @@ impl TrainConfig {
 
     /// Frames a training window needs after its latest input frame: the target of each of the
     /// `1 + n` loss steps.
-    pub fn frames_after(&self) -> usize {
+    pub(crate) fn frames_after(&self) -> usize {
         1 + self.training.extra_steps
     }
 
     /// Frames a training window needs before its first input frame: the longest pushforward
     /// unroll.
-    pub fn frames_before(&self) -> usize {
+    pub(crate) fn frames_before(&self) -> usize {
         self.training
             .pushforward
             .as_ref()

@@ -15,13 +15,13 @@
 //! [`step`] is one training step read top to bottom ([`take_step`]: windows, mirroring, noise,
 //! targets, graph, the variant's loss, gradients, Adam); [`train_step`] and
 //! [`train_step_with`] take one Adam step on a loss of the caller's. A whole run, with its
-//! presets ([`config`]), checkpoints ([`checkpoint`]), screening on the validation split
+//! presets ([`config`]), checkpoints (`checkpoint`), screening on the validation split
 //! ([`screening`]) and files, is [`run::TrainingRun`]; `phi train` drives it.
 
 pub mod adam;
 pub mod average;
 pub mod cache;
-pub mod checkpoint;
+pub(crate) mod checkpoint;
 pub mod config;
 mod error;
 pub mod loss;
@@ -37,6 +37,7 @@ pub mod stream;
 
 pub use adam::{Adam, AdamConfig, LearningRate};
 pub use average::WeightAverage;
+pub use checkpoint::BEST_DIR;
 pub use config::TrainConfig;
 pub use error::TrainError;
 pub use loss::{ErrorNorm, acceleration_loss, non_kinematic_mask, one_step_loss};

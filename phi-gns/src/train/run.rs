@@ -9,7 +9,7 @@
 //!   previous row, the `learning_rate` of the row's step, `steps_per_second` (of the training
 //!   steps since the previous row, screening left out) — and, on
 //!   screening rows, `valid_mse_acc1` and `valid_rollout_mse`;
-//! - `checkpoints/step-…/`: the newest `checkpoints.keep` checkpoints ([`super::checkpoint`]);
+//! - `checkpoints/step-…/`: the newest `checkpoints.keep` checkpoints (`checkpoint.rs`);
 //! - `best/`: the model with the best screening metric so far.
 //! - `train.lock` ([`LOCK_FILE`]): the process id of the run while it is open, so that a
 //!   second run on the directory is refused; a killed run's lock is taken over.
@@ -48,13 +48,13 @@ use crate::model::{Gns, GnsKernels, ModelError, load_model};
 /// The value of `made_by` in `train.json`.
 pub const MADE_BY: &str = "phi train";
 /// The run's description file.
-pub const TRAIN_FILE: &str = "train.json";
+pub(crate) const TRAIN_FILE: &str = "train.json";
 /// The configuration as run.
 pub const CONFIG_FILE: &str = "config.toml";
 /// The loss and screening log.
 pub const LOG_FILE: &str = "train.csv";
 /// The header of [`LOG_FILE`].
-pub const LOG_HEADER: &str =
+pub(crate) const LOG_HEADER: &str =
     "step,loss,learning_rate,steps_per_second,valid_mse_acc1,valid_rollout_mse";
 
 /// `train.json`.

@@ -47,7 +47,7 @@ impl WindowSpec {
     }
 
     /// The earliest latest-input frame `t` of a window, `C + span_before`.
-    pub fn first_latest_frame(&self) -> usize {
+    pub(crate) fn first_latest_frame(&self) -> usize {
         self.input_velocities + self.span_before
     }
 

@@ -340,7 +340,7 @@ pub fn resolve_model(arg: &str) -> Result<ModelEntry> {
     };
     let (dir, run) = if path.join(MODEL_FILE).is_file() {
         let base = file_name(&path);
-        let run = if base == phi_gns::train::checkpoint::BEST_DIR {
+        let run = if base == phi_gns::train::BEST_DIR {
             path.parent().map(Path::to_path_buf)
         } else if base.starts_with("step-") {
             path.parent().and_then(Path::parent).map(Path::to_path_buf)
@@ -349,13 +349,13 @@ pub fn resolve_model(arg: &str) -> Result<ModelEntry> {
         };
         (path.clone(), run.filter(|r| r.join("train.csv").is_file()))
     } else if path.join("train.json").is_file() {
-        let best = path.join(phi_gns::train::checkpoint::BEST_DIR);
+        let best = path.join(phi_gns::train::BEST_DIR);
         if !best.join(MODEL_FILE).is_file() {
             bail!(
                 "--model {arg}: the training directory {} has no {}/ model yet (it is written \
                  at the first screening); name a checkpoint instead: {}/checkpoints/step-…",
                 path.display(),
-                phi_gns::train::checkpoint::BEST_DIR,
+                phi_gns::train::BEST_DIR,
                 path.display()
             );
         }
@@ -370,7 +370,7 @@ pub fn resolve_model(arg: &str) -> Result<ModelEntry> {
     let label = name.unwrap_or_else(|| match &run {
         Some(run) if dir != *run => {
             let base = file_name(&dir);
-            if base == phi_gns::train::checkpoint::BEST_DIR {
+            if base == phi_gns::train::BEST_DIR {
                 file_name(run)
             } else {
                 format!("{}@{base}", file_name(run))

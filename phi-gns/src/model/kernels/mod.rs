@@ -191,7 +191,7 @@ pub trait GnsKernels: Backend {
 }
 
 /// [`GnsKernels::gns_mlp`] from the per-layer kernels.
-pub fn composite_mlp<B: GnsKernels>(
+pub(crate) fn composite_mlp<B: GnsKernels>(
     mut x: B::Float,
     layers: &[Dense<B::Float>],
     norm: Option<&Norm<B::Float>>,
@@ -207,7 +207,7 @@ pub fn composite_mlp<B: GnsKernels>(
 }
 
 /// [`GnsKernels::gns_edge_mlp`] from the per-layer kernels.
-pub fn composite_edge_mlp<B: GnsKernels>(
+pub(crate) fn composite_edge_mlp<B: GnsKernels>(
     edges: B::Float,
     input: &EdgeInput<B::Float, B::Int>,
     rest: &[Dense<B::Float>],
