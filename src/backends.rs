@@ -63,7 +63,7 @@ impl BackendKind {
 
     /// What to pass instead of a backend without autodiff, for the refusals of `train` and
     /// `optimize`: `--backend burn, burn-wgpu or tch` with the autodiff backends of this build.
-    pub fn autodiff_hint() -> String {
+    pub(crate) fn autodiff_hint() -> String {
         let names: Vec<&str> = BackendKind::available()
             .into_iter()
             .filter(|kind| kind.has_autodiff())

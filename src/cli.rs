@@ -53,7 +53,7 @@ pub fn dataset_dir(
 ///
 /// # Errors
 /// The message clap prints after the flag.
-pub fn parse_split(name: &str) -> Result<String, String> {
+pub(crate) fn parse_split(name: &str) -> Result<String, String> {
     if name.is_empty() || name == "." || name == ".." || name.contains(['/', '\\']) {
         return Err(format!(
             "{name:?} is not a split name; use train, valid, test or another split the \

@@ -39,7 +39,7 @@ pub const GRID: usize = 64;
 pub const PARTICLES: usize = 100_000;
 
 /// Bins `PARTICLES` seeded random positions in `[0, GRID)²` into cells and counts them.
-pub fn particle_counts<B: Backend>(device: &B::Device) -> Result<Tensor<B>> {
+pub(crate) fn particle_counts<B: Backend>(device: &B::Device) -> Result<Tensor<B>> {
     let positions = Tensor::<B>::random_uniform(&[PARTICLES, 2], 0.0, GRID as f32, 42, device);
     let cells = positions.floor().to_int().clamp(0, GRID as i64 - 1);
     // Row-major cell index: y · GRID + x.
@@ -70,7 +70,7 @@ fn integrate<B: Backend>(velocity: &Tensor<B>, gravity: &Tensor<B>) -> Tensor<B>
 }
 
 /// Finds the launch velocity by gradient descent on the squared miss distance.
-pub fn inverse_ballistics<B: AutodiffBackend>(device: &B::Device) -> Result<Ballistics> {
+pub(crate) fn inverse_ballistics<B: AutodiffBackend>(device: &B::Device) -> Result<Ballistics> {
     let start = Instant::now();
     let gravity = Tensor::<B>::from_slice(&GRAVITY, &[2], device)?;
     let target = Tensor::<B>::from_slice(&TARGET, &[2], device)?;

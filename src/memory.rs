@@ -9,7 +9,7 @@ use anyhow::{Context, Result, bail};
 
 /// The machine's total memory in bytes (`MemTotal` of `/proc/meminfo`), `None` where it cannot
 /// be read (then no ceiling applies unless one is given).
-pub fn machine_memory() -> Option<u64> {
+pub(crate) fn machine_memory() -> Option<u64> {
     let text = std::fs::read_to_string("/proc/meminfo").ok()?;
     let line = text.lines().find(|l| l.starts_with("MemTotal:"))?;
     let mut words = line.split_whitespace().skip(1);
@@ -56,7 +56,7 @@ pub fn parse_bytes(text: &str) -> Result<u64> {
 }
 
 /// The environment variable that sets the limit.
-pub const LIMIT_VARIABLE: &str = "PHI_MEMORY_LIMIT";
+pub(crate) const LIMIT_VARIABLE: &str = "PHI_MEMORY_LIMIT";
 
 /// The memory limit in bytes: `PHI_MEMORY_LIMIT`, else the machine's memory (`u64::MAX` where it
 /// cannot be learnt).
@@ -89,7 +89,7 @@ pub fn check_memory(what: &str, bytes: u128) -> Result<()> {
 }
 
 /// A byte count for messages: `512 B`, `3.0 GiB`, `1.2e6 TiB`.
-pub fn format_bytes(bytes: u128) -> String {
+pub(crate) fn format_bytes(bytes: u128) -> String {
     const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
     let mut value = bytes as f64;
     let mut unit = 0;

@@ -500,7 +500,7 @@ fn write_loss_csv(path: &Path, records: &[IterationRecord]) -> Result<()> {
 /// The loss against the iteration, with axes, labels and a legend: on a logarithmic axis when
 /// every finite loss is positive, else a linear one; a non-finite loss leaves a gap. `None`
 /// when no loss is finite (nothing to draw).
-pub fn plot_losses(losses: &[f32]) -> Option<LinePlot> {
+pub(crate) fn plot_losses(losses: &[f32]) -> Option<LinePlot> {
     let finite: Vec<f32> = losses.iter().copied().filter(|l| l.is_finite()).collect();
     if finite.is_empty() {
         return None;

@@ -15,7 +15,7 @@ pub fn set_quiet(quiet: bool) {
 }
 
 /// Whether `phi -q` asked for results and errors only: no bars, and no progress lines either.
-pub fn is_quiet() -> bool {
+pub(crate) fn is_quiet() -> bool {
     QUIET.load(Ordering::Relaxed)
 }
 
@@ -26,7 +26,7 @@ fn drawn(show: bool) -> bool {
 
 /// A bar of `steps` steps on stderr, or a hidden one unless `show` (callers pass whether stderr
 /// is a terminal).
-pub fn step_bar(steps: usize, show: bool) -> ProgressBar {
+pub(crate) fn step_bar(steps: usize, show: bool) -> ProgressBar {
     if !drawn(show) {
         return ProgressBar::hidden();
     }
@@ -42,7 +42,7 @@ pub fn step_bar(steps: usize, show: bool) -> ProgressBar {
 }
 
 /// A bar of `len` items (`unit`, e.g. "trajectories") on stderr, or a hidden one unless `show`.
-pub fn count_bar(len: usize, unit: &str, show: bool) -> ProgressBar {
+pub(crate) fn count_bar(len: usize, unit: &str, show: bool) -> ProgressBar {
     if !drawn(show) {
         return ProgressBar::hidden();
     }

@@ -324,7 +324,7 @@ impl<B: LatticeKernels> RunState<'_, B> {
 
 /// What `phi simulate` writes in its output directory: the run's files, its PNG frames and its
 /// VTK series.
-pub const RUN_OUTPUTS: Outputs = Outputs {
+pub(crate) const RUN_OUTPUTS: Outputs = Outputs {
     command: "phi simulate",
     flag: "--out",
     files: &[
@@ -354,7 +354,7 @@ pub const RUN_OUTPUTS: Outputs = Outputs {
 /// # Errors
 /// A file where the directory should be; a non-empty directory without `force`; with `force`,
 /// one that holds anything `phi simulate` does not write (a dataset, other files).
-pub fn prepare_out_dir(out: &Path, force: bool) -> Result<OutputDir> {
+pub(crate) fn prepare_out_dir(out: &Path, force: bool) -> Result<OutputDir> {
     let mut dir = OutputDir::claim(out, &RUN_OUTPUTS, force)?;
     dir.clear_previous()?;
     dir.create()?;

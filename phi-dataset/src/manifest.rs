@@ -153,7 +153,7 @@ impl GeneratorConfig {
 
     /// The configuration as JSON, its `f32` values written with their shortest decimals
     /// (`0.05`, not `0.05000000074505806`).
-    pub fn to_json(&self) -> serde_json::Value {
+    pub(crate) fn to_json(&self) -> serde_json::Value {
         let text = serde_json::to_string(self).expect("a configuration serialises");
         serde_json::from_str(&text).expect("serde_json reads what it writes")
     }
@@ -191,7 +191,7 @@ pub struct Manifest {
 ///
 /// # Errors
 /// A file that cannot be read or parsed.
-pub fn read_manifest(dir: &Path) -> Result<Option<Manifest>> {
+pub(crate) fn read_manifest(dir: &Path) -> Result<Option<Manifest>> {
     let path = dir.join(MANIFEST);
     if !path.exists() {
         return Ok(None);
@@ -206,7 +206,7 @@ pub fn read_manifest(dir: &Path) -> Result<Option<Manifest>> {
 ///
 /// # Errors
 /// I/O errors, naming the file.
-pub fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<()> {
+pub(crate) fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<()> {
     let text = serde_json::to_string_pretty(manifest).expect("a manifest serialises");
     let path = dir.join(MANIFEST);
     write_atomic::<phi_io::IoError>(&path, |w| phi_io::write_all(w, text.as_bytes(), &path))?;
@@ -217,7 +217,7 @@ pub fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<()> {
 ///
 /// # Errors
 /// A file that cannot be read or parsed as JSON.
-pub fn read_generator(dir: &Path) -> Result<Option<serde_json::Value>> {
+pub(crate) fn read_generator(dir: &Path) -> Result<Option<serde_json::Value>> {
     let path = dir.join(METADATA_FILE);
     if !path.exists() {
         return Ok(None);
@@ -235,7 +235,7 @@ pub fn read_generator(dir: &Path) -> Result<Option<serde_json::Value>> {
 ///
 /// # Errors
 /// A missing or unreadable trajectory file, I/O errors.
-pub fn write_dataset_metadata(
+pub(crate) fn write_dataset_metadata(
     dir: &Path,
     config: &GeneratorConfig,
     counts: &BTreeMap<String, usize>,

@@ -31,7 +31,7 @@ impl Split {
     }
 
     /// The thesis' number of trajectories.
-    pub fn default_count(self) -> usize {
+    pub(crate) fn default_count(self) -> usize {
         match self {
             Split::Train => 2000,
             Split::Valid => 20,

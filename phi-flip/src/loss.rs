@@ -148,7 +148,7 @@ pub fn density_loss<B: LatticeKernels>(
 ///
 /// # Errors
 /// Domain construction errors only (none for a valid `domain`).
-pub fn density_grids(domain: &Domain, levels: usize) -> Result<Vec<Domain>> {
+pub(crate) fn density_grids(domain: &Domain, levels: usize) -> Result<Vec<Domain>> {
     let mut grids = vec![domain.clone()];
     let mut resolution = domain.resolution().to_vec();
     while grids.len() < levels && resolution.iter().all(|&n| n % 2 == 0 && n >= 4) {

@@ -517,7 +517,7 @@ impl<B: AutodiffBackend + LatticeKernels> OptimizeProblem<B> {
     ///
     /// # Errors
     /// Simulation and loss errors.
-    pub fn loss_and_gradient_through(
+    pub(crate) fn loss_and_gradient_through(
         &self,
         forward: &dyn Forward<B>,
         positions: &Tensor<B>,

@@ -271,7 +271,7 @@ impl<B: LatticeKernels> SceneRun<B> {
     }
 
     /// The scene's `simulation.steps`.
-    pub fn scene_steps(&self) -> usize {
+    pub(crate) fn scene_steps(&self) -> usize {
         self.scene_steps
     }
 

@@ -120,7 +120,7 @@ impl AxisBox {
     }
 
     /// Half the edge lengths.
-    pub fn half_size(&self) -> Vec<f32> {
+    pub(crate) fn half_size(&self) -> Vec<f32> {
         self.lower
             .iter()
             .zip(&self.upper)

@@ -79,7 +79,7 @@ pub(crate) mod test_util {
     }
 
     /// `(name, &array)` pairs, as [`crate::npz::write_npz`] takes them.
-    pub fn as_refs<'a>(
+    pub(crate) fn as_refs<'a>(
         arrays: &'a [(&'static str, NpyArray)],
     ) -> Vec<(&'static str, &'a NpyArray)> {
         arrays.iter().map(|(n, a)| (*n, a)).collect()

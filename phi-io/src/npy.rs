@@ -57,7 +57,7 @@ impl ArrayData {
     }
 
     /// The size of one element in bytes.
-    pub fn item_size(&self) -> usize {
+    pub(crate) fn item_size(&self) -> usize {
         match self {
             ArrayData::F32(_) | ArrayData::I32(_) => 4,
             ArrayData::F64(_) | ArrayData::I64(_) => 8,

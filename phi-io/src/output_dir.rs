@@ -129,7 +129,7 @@ pub struct Outputs {
 
 impl Outputs {
     /// Whether `name` (a file directly in the target) is one the writer writes.
-    pub fn writes_file(&self, name: &str) -> bool {
+    pub(crate) fn writes_file(&self, name: &str) -> bool {
         self.files.iter().any(|f| matches(f, name))
     }
 }

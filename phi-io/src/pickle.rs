@@ -23,18 +23,18 @@ use crate::npy::{NpyArray, npy_header_for};
 
 /// Pickle opcodes of protocols 2 and 3 (Python's `Lib/pickletools.py` documents them).
 mod op {
-    pub const PROTO: u8 = 0x80;
-    pub const GLOBAL: u8 = b'c';
-    pub const BININT: u8 = b'J';
-    pub const BINUNICODE: u8 = b'X';
-    pub const BINBYTES: u8 = b'B';
-    pub const MARK: u8 = b'(';
-    pub const TUPLE: u8 = b't';
-    pub const TUPLE1: u8 = 0x85;
-    pub const TUPLE2: u8 = 0x86;
-    pub const REDUCE: u8 = b'R';
-    pub const SETITEMS: u8 = b'u';
-    pub const STOP: u8 = b'.';
+    pub(crate) const PROTO: u8 = 0x80;
+    pub(crate) const GLOBAL: u8 = b'c';
+    pub(crate) const BININT: u8 = b'J';
+    pub(crate) const BINUNICODE: u8 = b'X';
+    pub(crate) const BINBYTES: u8 = b'B';
+    pub(crate) const MARK: u8 = b'(';
+    pub(crate) const TUPLE: u8 = b't';
+    pub(crate) const TUPLE1: u8 = 0x85;
+    pub(crate) const TUPLE2: u8 = 0x86;
+    pub(crate) const REDUCE: u8 = b'R';
+    pub(crate) const SETITEMS: u8 = b'u';
+    pub(crate) const STOP: u8 = b'.';
 }
 
 /// The pickle protocol written.

@@ -93,7 +93,7 @@ impl Axis {
     }
 
     /// An axis over the plot-space range `lo..hi` (`lo < hi`) with about `target_ticks` ticks.
-    pub fn with_range(lo: f64, hi: f64, log: bool, target_ticks: usize) -> Axis {
+    pub(crate) fn with_range(lo: f64, hi: f64, log: bool, target_ticks: usize) -> Axis {
         let target = target_ticks.max(2);
         let (ticks, labels, minor) = if log {
             log_ticks(lo, hi, target)
@@ -112,7 +112,7 @@ impl Axis {
     }
 
     /// A categorical axis over `names`: category `i` spans `i..i + 1`, labelled at its centre.
-    pub fn categories(names: &[String]) -> Axis {
+    pub(crate) fn categories(names: &[String]) -> Axis {
         Axis {
             lo: 0.0,
             hi: names.len() as f64,
@@ -125,7 +125,7 @@ impl Axis {
 
     /// The label of the tick nearest to the plot-space value `v` (the chart library asks for
     /// labels by position; the positions are exactly [`Axis::ticks`]).
-    pub fn label_at(&self, v: f64) -> String {
+    pub(crate) fn label_at(&self, v: f64) -> String {
         self.ticks
             .iter()
             .zip(&self.labels)

@@ -70,7 +70,7 @@ impl Frame {
 
     /// The plot area in image pixels: columns `x0..x1`, rows `y0..y1`.
     #[cfg(test)]
-    pub fn image_area(&self) -> (std::ops::Range<u32>, std::ops::Range<u32>) {
+    pub(crate) fn image_area(&self) -> (std::ops::Range<u32>, std::ops::Range<u32>) {
         let s = crate::style::SUPERSAMPLE as i32;
         let (cols, rows) = &self.area;
         (

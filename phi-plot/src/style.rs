@@ -70,7 +70,7 @@ impl Metrics {
     }
 
     /// The sizes for a drawing area of `width` × `height` drawing pixels.
-    pub fn for_drawing(width: u32, height: u32) -> Metrics {
+    pub(crate) fn for_drawing(width: u32, height: u32) -> Metrics {
         Metrics::new(width / SUPERSAMPLE, height / SUPERSAMPLE)
     }
 
@@ -83,48 +83,48 @@ impl Metrics {
         TextStyle::from((FontFamily::Name(FAMILY), pixels * self.scale)).color(&INK)
     }
 
-    pub fn title_font(&self) -> TextStyle<'static> {
+    pub(crate) fn title_font(&self) -> TextStyle<'static> {
         self.text(22.0)
     }
 
-    pub fn axis_label_font(&self) -> TextStyle<'static> {
+    pub(crate) fn axis_label_font(&self) -> TextStyle<'static> {
         self.text(18.0)
     }
 
-    pub fn tick_font(&self) -> TextStyle<'static> {
+    pub(crate) fn tick_font(&self) -> TextStyle<'static> {
         self.text(15.0)
     }
 
-    pub fn legend_font(&self) -> TextStyle<'static> {
+    pub(crate) fn legend_font(&self) -> TextStyle<'static> {
         self.text(self.legend_font_size() / self.scale)
     }
 
     /// The legend's font size in drawing pixels.
-    pub fn legend_font_size(&self) -> f64 {
+    pub(crate) fn legend_font_size(&self) -> f64 {
         15.0 * self.scale
     }
 
     /// Distance between the lines of the legend.
-    pub fn legend_line_height(&self) -> u32 {
+    pub(crate) fn legend_line_height(&self) -> u32 {
         (1.35 * self.legend_font_size()).ceil() as u32
     }
 
     /// Padding inside the legend box.
-    pub fn legend_margin(&self) -> u32 {
+    pub(crate) fn legend_margin(&self) -> u32 {
         self.px(8.0)
     }
 
     /// Distance of the legend box from the frame of the plot area.
-    pub fn legend_inset(&self) -> u32 {
+    pub(crate) fn legend_inset(&self) -> u32 {
         self.px(10.0)
     }
 
     /// Width reserved for the line or swatch of a legend entry.
-    pub fn legend_key_width(&self) -> u32 {
+    pub(crate) fn legend_key_width(&self) -> u32 {
         self.px(28.0)
     }
 
-    pub fn line_width(&self) -> u32 {
+    pub(crate) fn line_width(&self) -> u32 {
         self.px(2.0)
     }
 
@@ -132,17 +132,17 @@ impl Metrics {
         self.px(14.0)
     }
 
-    pub fn tick_length(&self) -> i32 {
+    pub(crate) fn tick_length(&self) -> i32 {
         self.px(5.0) as i32
     }
 
     /// Pixels along the x axis per labelled tick, about.
-    pub fn x_tick_spacing(&self) -> f64 {
+    pub(crate) fn x_tick_spacing(&self) -> f64 {
         110.0 * self.scale
     }
 
     /// Pixels along the y axis per labelled tick, about.
-    pub fn y_tick_spacing(&self) -> f64 {
+    pub(crate) fn y_tick_spacing(&self) -> f64 {
         60.0 * self.scale
     }
 }

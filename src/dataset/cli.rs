@@ -344,11 +344,11 @@ fn merge_paths(out: Option<PathBuf>, mut shards: Vec<PathBuf>) -> Result<(PathBu
 pub const IMPORT_MARKER: &str = "import.json";
 
 /// The `made_by` of [`IMPORT_MARKER`].
-pub const IMPORT_MADE_BY: &str = "phi dataset import";
+pub(crate) const IMPORT_MADE_BY: &str = "phi dataset import";
 
 /// What `phi dataset import` writes: a dataset (metadata.json and a folder of trajectories per
 /// split) and [`IMPORT_MARKER`].
-pub const IMPORT_OUTPUTS: Outputs = Outputs {
+pub(crate) const IMPORT_OUTPUTS: Outputs = Outputs {
     command: "phi dataset import",
     flag: "--out",
     files: &[IMPORT_MARKER, METADATA_FILE],

@@ -27,7 +27,7 @@ use crate::output::target::{Marker, Outputs};
 pub const EXPORT_MARKER: &str = "export.json";
 
 /// The `made_by` of [`EXPORT_MARKER`].
-pub const EXPORT_MADE_BY: &str = "phi dataset export";
+pub(crate) const EXPORT_MADE_BY: &str = "phi dataset export";
 
 /// What `phi dataset export` writes, in every format: the files of each split, the format's
 /// metadata.json and [`EXPORT_MARKER`].
@@ -40,7 +40,7 @@ pub const EXPORT_OUTPUTS: Outputs = Outputs {
 };
 
 /// The script that writes LagrangeBench's HDF5 files.
-pub const LAGRANGEBENCH_SCRIPT: &str = include_str!("lagrangebench_h5.py");
+pub(crate) const LAGRANGEBENCH_SCRIPT: &str = include_str!("lagrangebench_h5.py");
 
 /// Formats of `phi dataset export`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]

@@ -121,7 +121,7 @@ impl DatasetRenderer {
 /// # Errors
 /// A missing or inconsistent dataset or trajectory, an `out` that would destroy another file,
 /// I/O errors.
-pub fn render_trajectory(
+pub(crate) fn render_trajectory(
     dir: &Path,
     split: &str,
     index: usize,

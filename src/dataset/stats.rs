@@ -202,7 +202,7 @@ pub fn dataset_stats(options: &StatsOptions) -> Result<StatsReport> {
 }
 
 /// Where `--out PNG` puts the heat map: beside it, `{stem}_heatmap.png`.
-pub fn heatmap_path(out: &Path) -> PathBuf {
+pub(crate) fn heatmap_path(out: &Path) -> PathBuf {
     let stem = out.file_stem().unwrap_or_default().to_string_lossy();
     out.with_file_name(format!("{stem}_heatmap.png"))
 }
@@ -404,7 +404,7 @@ pub fn plot(report: &StatsReport, radius: f32) -> Result<LinePlot> {
 }
 
 /// The printed form of a report: counts, then the neighbour distribution every `every` frames.
-pub fn format_report(report: &StatsReport, dir: &Path, radius: f32, every: usize) -> String {
+pub(crate) fn format_report(report: &StatsReport, dir: &Path, radius: f32, every: usize) -> String {
     let mut s = format!(
         "{}: split {}, {} of {} trajectories, {} frames\n",
         dir.display(),

@@ -109,7 +109,7 @@ pub struct InitSummary {
 }
 
 /// The configuration the options ask for, on top of the thesis' sizes and the dataset's facts.
-pub fn config_for(args: &InitArgs, metadata: &Metadata) -> GnsConfig {
+pub(crate) fn config_for(args: &InitArgs, metadata: &Metadata) -> GnsConfig {
     let mut config = GnsConfig::thesis(metadata.dim);
     config.connectivity_radius = metadata.default_connectivity_radius;
     config.boundary_features = metadata.variant != Variant::WallsAsParticles;

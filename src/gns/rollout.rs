@@ -53,14 +53,14 @@ pub const ROLLOUT_FORMAT_VERSION: u32 = 1;
 /// The record of a rollout directory.
 pub const RECORD_FILE: &str = "rollout.json";
 /// The positions of a rollout directory.
-pub const POSITIONS_FILE: &str = "rollout.npz";
+pub(crate) const POSITIONS_FILE: &str = "rollout.npz";
 /// The animation of a rollout directory.
-pub const GIF_FILE: &str = "rollout.gif";
+pub(crate) const GIF_FILE: &str = "rollout.gif";
 /// [`RolloutRecord::reason`] while the rollout runs (what a killed run leaves).
-pub const RUNNING: &str = "not finished: the rollout is running or was interrupted";
+pub(crate) const RUNNING: &str = "not finished: the rollout is running or was interrupted";
 
 /// The VTK series of the prediction, of the truth, and their folder.
-pub const VTK_FILES: [&str; 3] = ["rollout.pvd", "truth.pvd", "vtk"];
+pub(crate) const VTK_FILES: [&str; 3] = ["rollout.pvd", "truth.pvd", "vtk"];
 
 /// What `phi rollout` writes in each trajectory's folder, recognised by its [`RECORD_FILE`]
 /// of [`ROLLOUT_FORMAT`].
@@ -214,7 +214,7 @@ pub struct RolloutRecord {
 }
 
 /// The folder of trajectory `index` of `split` in the output directory: `<split>_<index>`.
-pub fn rollout_dir_name(split: &str, index: usize) -> String {
+pub(crate) fn rollout_dir_name(split: &str, index: usize) -> String {
     format!("{split}_{index}")
 }
 
@@ -746,7 +746,7 @@ fn write_record(dir: &Path, record: &RolloutRecord) -> Result<()> {
 
 /// The steps whose MSE the summary prints: every step with `every_step` or at most 6 steps, else
 /// the first, the quartiles and the last.
-pub fn printed_steps(steps: usize, every_step: bool) -> Vec<usize> {
+pub(crate) fn printed_steps(steps: usize, every_step: bool) -> Vec<usize> {
     if every_step || steps <= 6 {
         return (1..=steps).collect();
     }
@@ -756,7 +756,7 @@ pub fn printed_steps(steps: usize, every_step: bool) -> Vec<usize> {
 }
 
 /// The summary `phi rollout` prints for one trajectory: what ran, the MSE table, what it wrote.
-pub fn format_record(record: &RolloutRecord, dir: &Path, every_step: bool) -> String {
+pub(crate) fn format_record(record: &RolloutRecord, dir: &Path, every_step: bool) -> String {
     let mut text = format!(
         "{}: {} of {} steps from frame {} (window {}..={}) on {}, {} particles ({} kinematic), \
          {:.2} s ({:.2} ms/step in the model)\n",

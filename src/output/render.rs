@@ -55,7 +55,7 @@ impl RgbImage {
     }
 
     /// Sets the pixel in column `x` and row `y`; does nothing outside the picture.
-    pub fn set_pixel(&mut self, x: u32, y: u32, color: [u8; 3]) {
+    pub(crate) fn set_pixel(&mut self, x: u32, y: u32, color: [u8; 3]) {
         if let Some(i) = self.index(x, y)
             && let Some(p) = self.pixels.get_mut(i..i + 3)
         {
@@ -204,7 +204,7 @@ impl Default for FrameStyle {
 
 impl FrameStyle {
     /// The colour of particles of kind `kind`.
-    pub fn kind_color(&self, kind: u8) -> [u8; 3] {
+    pub(crate) fn kind_color(&self, kind: u8) -> [u8; 3] {
         self.kind_colors
             .get(usize::from(kind))
             .copied()
@@ -562,7 +562,7 @@ impl GifWriter {
 
     /// As [`GifWriter::create`], with the given palette (1 to 256 colours; pass
     /// [`FrameStyle::palette`] of a custom style).
-    pub fn create_with_palette(
+    pub(crate) fn create_with_palette(
         path: impl AsRef<Path>,
         width: u32,
         height: u32,
@@ -626,10 +626,6 @@ impl GifWriter {
         &self.path
     }
 
-    /// The number of frames written so far.
-    pub fn frames_written(&self) -> usize {
-        self.frames
-    }
 
     /// Moves what the encoder produced so far to the file and flushes it.
     fn flush_encoded(&mut self) -> Result<(), OutputError> {
@@ -669,7 +665,13 @@ impl GifWriter {
     ///
     /// Fails if the picture's size differs from the GIF's, if `finish` failed earlier, or on
     /// I/O errors.
-    pub fn add_frame(&mut self, image: &RgbImage) -> Result<(), OutputError> {
+    /// The number of frames written so far.
+    #[cfg(test)]
+    pub(crate) fn frames_written(&self) -> usize {
+        self.frames
+    }
+
+    pub(crate) fn add_frame(&mut self, image: &RgbImage) -> Result<(), OutputError> {
         image.validate()?;
         if image.width != u32::from(self.width) || image.height != u32::from(self.height) {
             return Err(OutputError::InvalidInput(format!(

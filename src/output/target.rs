@@ -75,7 +75,7 @@ pub fn check_not_a_file(path: &Path, flag: &'static str) -> Result<()> {
 /// # Errors
 /// `out` is a file; holds a file or folder the command does not write (named with its path
 /// inside `out`); holds a previous output and `force` is off.
-pub fn check_dir(out: &Path, outputs: &Outputs, force: bool) -> Result<Previous> {
+pub(crate) fn check_dir(out: &Path, outputs: &Outputs, force: bool) -> Result<Previous> {
     Ok(Previous(OutputDir::claim(out, outputs, force)?))
 }
 
@@ -85,7 +85,7 @@ pub fn check_dir(out: &Path, outputs: &Outputs, force: bool) -> Result<Previous>
 /// # Errors
 /// `out` is a file; holds a file or folder the command does not write, or the command's file
 /// names without its marker.
-pub fn previous_output(out: &Path, outputs: &Outputs, force: bool) -> Result<Previous> {
+pub(crate) fn previous_output(out: &Path, outputs: &Outputs, force: bool) -> Result<Previous> {
     Ok(Previous(OutputDir::inspect(out, outputs, force)?))
 }
 
@@ -93,6 +93,6 @@ pub fn previous_output(out: &Path, outputs: &Outputs, force: bool) -> Result<Pre
 ///
 /// # Errors
 /// As there, naming the path.
-pub fn check_file(out: &Path, output: &OutputFile, force: bool) -> Result<()> {
+pub(crate) fn check_file(out: &Path, output: &OutputFile, force: bool) -> Result<()> {
     Ok(output.check(out, force)?)
 }

@@ -76,8 +76,10 @@ impl VtkSeries {
         self
     }
 
+
     /// The collection file.
-    pub fn pvd_path(&self) -> &Path {
+    #[cfg(test)]
+    pub(crate) fn pvd_path(&self) -> &Path {
         &self.pvd
     }
 
@@ -117,7 +119,7 @@ fn write_text(path: &Path, text: &str) -> Result<(), OutputError> {
 }
 
 /// The `.pvd` collection of `(time, file)` entries.
-pub fn pvd_text(entries: &[(f64, String)]) -> String {
+pub(crate) fn pvd_text(entries: &[(f64, String)]) -> String {
     let mut s = String::from(
         "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" \
          byte_order=\"LittleEndian\">\n  <Collection>\n",
@@ -168,7 +170,7 @@ fn as_xyz(values: &[f32], dim: usize) -> Vec<u8> {
 }
 
 /// The `.vtu` document of one frame.
-pub fn vtu_text(frame: &VtkFrame<'_>) -> Result<String, String> {
+pub(crate) fn vtu_text(frame: &VtkFrame<'_>) -> Result<String, String> {
     let d = frame.dim;
     if !(1..=3).contains(&d) {
         return Err(format!("dimension {d} (must be 1, 2 or 3)"));

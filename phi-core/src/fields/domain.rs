@@ -139,7 +139,7 @@ impl Domain {
     ///
     /// # Errors
     /// [`TensorError::InvalidArgument`] naming both resolutions and bounds when they differ.
-    pub fn check_same(&self, other: &Domain, op: &'static str) -> Result<()> {
+    pub(crate) fn check_same(&self, other: &Domain, op: &'static str) -> Result<()> {
         if self.resolution == other.resolution
             && self.lower == other.lower
             && self.upper == other.upper

@@ -112,7 +112,7 @@ impl<B: Backend> CenteredGrid<B> {
     ///
     /// # Errors
     /// [`TensorError::InvalidArgument`] when the grid has more than one channel.
-    pub fn scalar_values(&self, op: &'static str) -> Result<Tensor<B>> {
+    pub(crate) fn scalar_values(&self, op: &'static str) -> Result<Tensor<B>> {
         if self.channels() != 1 {
             return Err(TensorError::InvalidArgument {
                 op,
@@ -270,7 +270,7 @@ impl<B: Backend> StaggeredGrid<B> {
     ///
     /// # Errors
     /// As [`StaggeredGrid::new`].
-    pub fn with_components(&self, components: Vec<Tensor<B>>) -> Result<Self> {
+    pub(crate) fn with_components(&self, components: Vec<Tensor<B>>) -> Result<Self> {
         Self::new(components, self.domain.clone())
     }
 

@@ -68,7 +68,7 @@ impl PoissonSystem {
 
     /// The cell index of each unknown as `i64`, for gathers and scatters of tensors
     /// (`IntTensor::from_vec`).
-    pub fn unknown_cells_i64(&self) -> Vec<i64> {
+    pub(crate) fn unknown_cells_i64(&self) -> Vec<i64> {
         self.unknown_to_cell.iter().map(|&c| c as i64).collect()
     }
 

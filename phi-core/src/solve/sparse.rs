@@ -253,7 +253,7 @@ impl SparseMatrix {
     }
 
     /// Number of stored entries.
-    pub fn nnz(&self) -> usize {
+    pub(crate) fn nnz(&self) -> usize {
         self.values.len()
     }
 
@@ -310,7 +310,7 @@ impl SparseMatrix {
     ///
     /// # Panics
     /// When `x` does not have `ncols` entries or `y` not `nrows`.
-    pub fn mul_vec_into(&self, x: &[f64], y: &mut [f64]) {
+    pub(crate) fn mul_vec_into(&self, x: &[f64], y: &mut [f64]) {
         assert_eq!(x.len(), self.ncols, "mul_vec: x has the wrong length");
         assert_eq!(y.len(), self.nrows, "mul_vec: y has the wrong length");
         for (i, out) in y.iter_mut().enumerate() {

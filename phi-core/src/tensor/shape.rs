@@ -4,7 +4,7 @@ use crate::error::{Result, TensorError};
 
 /// The NumPy broadcast of two shapes: aligned at the trailing axis, missing leading axes count
 /// as 1, and an axis of length 1 stretches to the other's length.
-pub fn broadcast_shapes(op: &'static str, lhs: &[usize], rhs: &[usize]) -> Result<Vec<usize>> {
+pub(crate) fn broadcast_shapes(op: &'static str, lhs: &[usize], rhs: &[usize]) -> Result<Vec<usize>> {
     let rank = lhs.len().max(rhs.len());
     let mut out = vec![0; rank];
     for (i, length) in out.iter_mut().enumerate() {
@@ -39,7 +39,7 @@ fn axis_from_end(shape: &[usize], from_end: usize) -> usize {
 }
 
 /// Whether `from` broadcasts to exactly `to`.
-pub fn broadcasts_to(from: &[usize], to: &[usize]) -> bool {
+pub(crate) fn broadcasts_to(from: &[usize], to: &[usize]) -> bool {
     from.len() <= to.len()
         && from
             .iter()
@@ -68,7 +68,7 @@ pub fn numel(shape: &[usize]) -> usize {
 
 /// The output shape of a batched matrix product `[..., m, k] × [..., k, n]`, with the batch axes
 /// broadcast.
-pub fn matmul_shape(lhs: &[usize], rhs: &[usize]) -> Result<(Vec<usize>, Vec<usize>)> {
+pub(crate) fn matmul_shape(lhs: &[usize], rhs: &[usize]) -> Result<(Vec<usize>, Vec<usize>)> {
     let mismatch = |reason: String| TensorError::ShapeMismatch {
         op: "matmul",
         lhs: lhs.to_vec(),

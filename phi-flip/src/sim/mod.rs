@@ -206,7 +206,7 @@ impl<B: Backend> Particles<B> {
     }
 
     /// The affine matrices `[N, d, d]`, zeros when there are none.
-    pub fn affine_or_zeros(&self) -> Tensor<B> {
+    pub(crate) fn affine_or_zeros(&self) -> Tensor<B> {
         match &self.affine {
             Some(c) => c.clone(),
             None => {
@@ -462,7 +462,7 @@ impl<B: LatticeKernels> FlipSimulation<B> {
     ///
     /// # Errors
     /// Only geometry errors, which cannot happen for valid obstacles.
-    pub fn obstacles_at(&self, time: f32) -> Result<Vec<Obstacle>> {
+    pub(crate) fn obstacles_at(&self, time: f32) -> Result<Vec<Obstacle>> {
         self.shifted_obstacles_at(time, &[])
     }
 
@@ -535,7 +535,7 @@ impl<B: LatticeKernels> FlipSimulation<B> {
     ///
     /// # Errors
     /// Only tensor errors.
-    pub fn emit_with(
+    pub(crate) fn emit_with(
         &self,
         particles: &Particles<B>,
         step: usize,

@@ -60,19 +60,19 @@ pub const CACHE_FORMAT: &str = "phi-eval-trajectory";
 /// The record of an evaluation directory.
 pub const RECORD_FILE: &str = "eval.json";
 /// The table in the units of table B.1.
-pub const TABLE_MD: &str = "table.md";
+pub(crate) const TABLE_MD: &str = "table.md";
 /// The table in raw values.
-pub const TABLE_CSV: &str = "table.csv";
+pub(crate) const TABLE_CSV: &str = "table.csv";
 /// The per-trajectory results.
 pub const CACHE_DIR: &str = "cache";
 /// Fig. 5.7: MSE and EMD per frame.
-pub const ERROR_PLOT: &str = "error_over_time.png";
+pub(crate) const ERROR_PLOT: &str = "error_over_time.png";
 /// Fig. 5.6: the metrics of table B.1 as bars.
-pub const METRICS_PLOT: &str = "metrics.png";
+pub(crate) const METRICS_PLOT: &str = "metrics.png";
 /// Fig. 5.5: the screening curves of the training logs.
-pub const SCREENING_PLOT: &str = "screening.png";
+pub(crate) const SCREENING_PLOT: &str = "screening.png";
 /// The rollouts of every model on one trajectory, beside the truth.
-pub const GIF_FILE: &str = "rollouts.gif";
+pub(crate) const GIF_FILE: &str = "rollouts.gif";
 
 /// What `phi eval` writes, recognised by the `format` of its [`RECORD_FILE`]. The entries of
 /// [`CACHE_DIR`] are checked one by one when read ([`EVAL_FORMAT`]'s cache entries).
@@ -326,7 +326,7 @@ pub struct Plan {
 ///
 /// # Errors
 /// A directory that is neither, or a model.json that does not read.
-pub fn resolve_model(arg: &str) -> Result<ModelEntry> {
+pub(crate) fn resolve_model(arg: &str) -> Result<ModelEntry> {
     let (name, path) = match arg.split_once('=') {
         Some((name, path)) if !name.is_empty() && !Path::new(arg).exists() => {
             (Some(name.to_string()), PathBuf::from(path))
@@ -1052,7 +1052,7 @@ fn write_gif<B: GnsKernels>(
 }
 
 /// `<split>_<index>.json`.
-pub fn cache_file_name(split: &str, index: usize) -> String {
+pub(crate) fn cache_file_name(split: &str, index: usize) -> String {
     format!("{split}_{index}.json")
 }
 
@@ -1194,7 +1194,7 @@ fn not_measured(record: &EvalRecord, name: &str) -> bool {
 /// The markdown table: one row per model, the thesis's four metrics in table B.1's units,
 /// then the extra ones; a rollout that blew up makes its metrics `inf`, a metric switched off
 /// reads `–` (empty in the CSV).
-pub fn markdown_table(record: &EvalRecord) -> String {
+pub(crate) fn markdown_table(record: &EvalRecord) -> String {
     let mut text = String::from("| model |");
     for (header, ..) in COLUMNS {
         text.push_str(&format!(" {header} |"));
@@ -1236,7 +1236,7 @@ pub fn markdown_table(record: &EvalRecord) -> String {
 
 /// The CSV table: raw values (stored units², normalised units², fractions), `inf` for a blown-up
 /// rollout, empty for a metric switched off.
-pub fn csv_table(record: &EvalRecord) -> String {
+pub(crate) fn csv_table(record: &EvalRecord) -> String {
     let mut text = String::from("model");
     for (_, _, name, _) in COLUMNS {
         text.push(',');

@@ -87,7 +87,7 @@ pub fn metric_bars(record: &EvalRecord, path: &Path) -> Result<()> {
 ///
 /// # Errors
 /// A log that does not read or whose header lacks the columns.
-pub fn read_screening(path: &Path) -> Result<Vec<(f64, f64, f64)>> {
+pub(crate) fn read_screening(path: &Path) -> Result<Vec<(f64, f64, f64)>> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let mut lines = text.lines();
