@@ -33,6 +33,21 @@ def test_simulate_equals_cli_bit_for_bit(cli_trajectory):
     assert result["steps_completed"][0] == STEPS
 
 
+def test_arrays_come_back_without_a_copy(model_dir, dataset_dir):
+    # A returned array wraps the buffer the library filled (its base is the Rust container
+    # that owns it), C-contiguous and writeable: NumPy copied nothing.
+    def wraps_the_library_buffer(array):
+        return (not array.flags.owndata and type(array.base).__name__ == "PySliceContainer"
+                and array.flags.c_contiguous and array.flags.writeable)
+
+    result = phi_rs.simulate(SCENE, steps=1)
+    assert all(wraps_the_library_buffer(result[key]) for key in ("positions", "velocities"))
+    model = phi_rs.Model.load(model_dir)
+    positions, types = phi_rs.Dataset(dataset_dir)["train", 0]
+    assert wraps_the_library_buffer(positions) and wraps_the_library_buffer(types)
+    assert wraps_the_library_buffer(model.rollout(positions, types, steps=2))
+
+
 def test_simulate_takes_toml_text_and_str_paths():
     from_text = phi_rs.simulate(SCENE.read_text(), steps=2)
     from_str = phi_rs.simulate(str(SCENE), steps=2)
