@@ -3,12 +3,12 @@
 use std::path::{Path, PathBuf};
 
 use phi_core::Tensor;
-use phi_gns::data::{Trajectory, Variant, read_metadata};
+use phi_gns::data::{Trajectory, read_metadata};
 use phi_gns::eval::metrics::Container;
 use phi_gns::eval::{EmdCost, EvalOptions, evaluate_trajectory};
 use phi_gns::model::{
-    Gns, GnsConfig, GnsKernels, GraphBatch, MODEL_FILE, ModelSpec, WEIGHTS_FILE, Walls, load_model,
-    save_model,
+    ConfigOverrides, Gns, GnsConfig, GnsKernels, GraphBatch, MODEL_FILE, ModelSpec, WEIGHTS_FILE,
+    Walls, load_model, save_model,
 };
 use phi_gns::rollout::{Rollout, RolloutRange, input_window, rollout_positions};
 use pyo3::prelude::*;
@@ -94,50 +94,6 @@ fn predict_on<B: GnsKernels>(
     let mut stepper = Rollout::new(model, batch)?;
     stepper.step(&kinematic)?;
     Ok(stepper.read().to_vec())
-}
-
-/// The configuration `phi model init` makes for a dataset: the thesis' sizes
-/// (`GnsConfig::thesis`), the dataset's `default_connectivity_radius`, boundary features unless
-/// its walls are particles; then the options given.
-#[allow(clippy::too_many_arguments)]
-fn init_config(
-    metadata: &phi_gns::data::Metadata,
-    latent: Option<usize>,
-    hidden: Option<usize>,
-    hidden_layers: Option<usize>,
-    message_passing_steps: Option<usize>,
-    input_velocities: Option<usize>,
-    embedding: Option<usize>,
-    radius: Option<f64>,
-    boundary_features: Option<bool>,
-    noise_std: Option<f64>,
-) -> GnsConfig {
-    let mut config = GnsConfig::thesis(metadata.dim);
-    config.connectivity_radius = metadata.default_connectivity_radius;
-    config.boundary_features = metadata.variant != Variant::WallsAsParticles;
-    let sizes = [
-        (&mut config.latent_size, latent),
-        (&mut config.hidden_size, hidden),
-        (&mut config.hidden_layers, hidden_layers),
-        (&mut config.message_passing_steps, message_passing_steps),
-        (&mut config.input_velocities, input_velocities),
-        (&mut config.embedding_size, embedding),
-    ];
-    for (size, value) in sizes {
-        if let Some(v) = value {
-            *size = v;
-        }
-    }
-    if let Some(r) = radius {
-        config.connectivity_radius = r;
-    }
-    if let Some(b) = boundary_features {
-        config.boundary_features = b;
-    }
-    if let Some(sigma) = noise_std {
-        config.noise_std = sigma;
-    }
-    config
 }
 
 /// The argument of `Model.init` behind a `model.json` key.
@@ -282,18 +238,18 @@ impl Model {
         let backend = backend.to_string();
         let inner = detached(py, move || {
             let metadata = read_metadata(&data)?;
-            let config = init_config(
-                &metadata,
-                latent,
-                hidden,
+            let overrides = ConfigOverrides {
+                latent_size: latent,
+                hidden_size: hidden,
                 hidden_layers,
                 message_passing_steps,
                 input_velocities,
-                embedding,
-                radius,
+                embedding_size: embedding,
+                connectivity_radius: radius,
                 boundary_features,
                 noise_std,
-            );
+            };
+            let config = GnsConfig::for_dataset(&metadata, &overrides);
             let mut spec = ModelSpec::for_dataset(&metadata, config, seed);
             spec.provenance = serde_json::json!({
                 "made_by": "phi_rs.Model.init",

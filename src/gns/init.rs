@@ -16,8 +16,10 @@ use std::path::PathBuf;
 
 use anyhow::{Result, bail};
 use phi_core::backend::Host;
-use phi_gns::data::{METADATA_FILE, Metadata, Variant, read_metadata};
-use phi_gns::model::{Gns, GnsConfig, MODEL_FILE, ModelError, ModelSpec, WEIGHTS_FILE, save_model};
+use phi_gns::data::{METADATA_FILE, Metadata, read_metadata};
+use phi_gns::model::{
+    ConfigOverrides, Gns, GnsConfig, MODEL_FILE, ModelError, ModelSpec, WEIGHTS_FILE, save_model,
+};
 
 use crate::output::target::{Marker, Outputs, check_dir};
 
@@ -110,36 +112,25 @@ pub struct InitSummary {
 
 /// The configuration the options ask for, on top of the thesis' sizes and the dataset's facts.
 pub(crate) fn config_for(args: &InitArgs, metadata: &Metadata) -> GnsConfig {
-    let mut config = GnsConfig::thesis(metadata.dim);
-    config.connectivity_radius = metadata.default_connectivity_radius;
-    config.boundary_features = metadata.variant != Variant::WallsAsParticles;
-    let set = |target: &mut usize, value: Option<usize>| {
-        if let Some(v) = value {
-            *target = v;
-        }
+    let boundary_features = if args.boundary_features {
+        Some(true)
+    } else if args.no_boundary_features {
+        Some(false)
+    } else {
+        None
     };
-    set(&mut config.latent_size, args.latent);
-    set(&mut config.hidden_size, args.hidden);
-    set(&mut config.hidden_layers, args.hidden_layers);
-    set(
-        &mut config.message_passing_steps,
-        args.message_passing_steps,
-    );
-    set(&mut config.input_velocities, args.input_velocities);
-    set(&mut config.embedding_size, args.embedding);
-    if let Some(r) = args.radius {
-        config.connectivity_radius = r;
-    }
-    if args.no_boundary_features {
-        config.boundary_features = false;
-    }
-    if args.boundary_features {
-        config.boundary_features = true;
-    }
-    if let Some(sigma) = args.noise_std {
-        config.noise_std = sigma;
-    }
-    config
+    let overrides = ConfigOverrides {
+        latent_size: args.latent,
+        hidden_size: args.hidden,
+        hidden_layers: args.hidden_layers,
+        message_passing_steps: args.message_passing_steps,
+        input_velocities: args.input_velocities,
+        embedding_size: args.embedding,
+        connectivity_radius: args.radius,
+        boundary_features,
+        noise_std: args.noise_std,
+    };
+    GnsConfig::for_dataset(metadata, &overrides)
 }
 
 /// The option of `phi model init` behind a `model.json` key.

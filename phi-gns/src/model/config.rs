@@ -7,7 +7,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::ModelError;
-use crate::data::{Metadata, OBSTACLE};
+use crate::data::{Metadata, OBSTACLE, Variant};
 
 /// The value of [`ModelSpec::format`].
 pub const MODEL_FORMAT: &str = "phi-gns-model";
@@ -74,6 +74,31 @@ impl Walls {
     }
 }
 
+/// The sizes and options of [`GnsConfig::for_dataset`] that a caller chooses; `None` keeps the
+/// default. Validation happens on the [`ModelSpec`] made from the result
+/// ([`ModelSpec::validate`]), which names the `model.json` key of a bad value.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ConfigOverrides {
+    /// `latent_size`.
+    pub latent_size: Option<usize>,
+    /// `hidden_size`.
+    pub hidden_size: Option<usize>,
+    /// `hidden_layers`.
+    pub hidden_layers: Option<usize>,
+    /// `message_passing_steps`.
+    pub message_passing_steps: Option<usize>,
+    /// `input_velocities` (`C`).
+    pub input_velocities: Option<usize>,
+    /// `embedding_size`.
+    pub embedding_size: Option<usize>,
+    /// `connectivity_radius`, stored units.
+    pub connectivity_radius: Option<f64>,
+    /// `boundary_features`.
+    pub boundary_features: Option<bool>,
+    /// `noise_std` (σ).
+    pub noise_std: Option<f64>,
+}
+
 impl GnsConfig {
     /// The sizes of the thesis and of DeepMind's model for a `dim`-dimensional dataset with two
     /// particle types: `C = 5`, `R = 0.03`, latent and hidden width 128, 2 hidden layers, 10
@@ -93,6 +118,43 @@ impl GnsConfig {
             noise_std: 0.0,
             walls: Walls::Open,
         }
+    }
+
+    /// The configuration `phi model init` (and `phi_rs.Model.init`) makes for a dataset: the
+    /// thesis's sizes ([`GnsConfig::thesis`]), the dataset's `default_connectivity_radius`,
+    /// boundary features unless its walls are particles; then each size or option `overrides`
+    /// sets.
+    ///
+    /// ```
+    /// # use phi_gns::model::{ConfigOverrides, GnsConfig};
+    /// # fn demo(metadata: &phi_gns::data::Metadata) {
+    /// let small = ConfigOverrides { latent_size: Some(64), message_passing_steps: Some(5),
+    ///                               ..Default::default() };
+    /// let config = GnsConfig::for_dataset(metadata, &small);
+    /// assert_eq!((config.latent_size, config.hidden_size), (64, 128));
+    /// # }
+    /// ```
+    pub fn for_dataset(metadata: &Metadata, overrides: &ConfigOverrides) -> Self {
+        let mut config = GnsConfig::thesis(metadata.dim);
+        config.connectivity_radius = metadata.default_connectivity_radius;
+        config.boundary_features = metadata.variant != Variant::WallsAsParticles;
+        let o = overrides;
+        for (size, value) in [
+            (&mut config.latent_size, o.latent_size),
+            (&mut config.hidden_size, o.hidden_size),
+            (&mut config.hidden_layers, o.hidden_layers),
+            (&mut config.message_passing_steps, o.message_passing_steps),
+            (&mut config.input_velocities, o.input_velocities),
+            (&mut config.embedding_size, o.embedding_size),
+        ] {
+            if let Some(v) = value {
+                *size = v;
+            }
+        }
+        config.connectivity_radius = o.connectivity_radius.unwrap_or(config.connectivity_radius);
+        config.boundary_features = o.boundary_features.unwrap_or(config.boundary_features);
+        config.noise_std = o.noise_std.unwrap_or(config.noise_std);
+        config
     }
 
     /// Whether nodes carry a particle-type embedding (more than one type).

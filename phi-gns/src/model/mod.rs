@@ -51,7 +51,9 @@ use phi_core::tensor::Tensor;
 
 use crate::graph::GraphError;
 pub use batch::GraphBatch;
-pub use config::{GnsConfig, MODEL_FORMAT, MODEL_FORMAT_VERSION, ModelSpec, Normalisation, Walls};
+pub use config::{
+    ConfigOverrides, GnsConfig, MODEL_FORMAT, MODEL_FORMAT_VERSION, ModelSpec, Normalisation, Walls,
+};
 pub use features::Normalisers;
 pub use files::{MODEL_FILE, WEIGHTS_FILE, load_model, read_spec, save_model};
 pub use floor::Floor;
