@@ -377,7 +377,7 @@ fn train_refuses_what_it_cannot_run_and_names_why() {
     std::fs::create_dir_all(&foreign).unwrap();
     std::fs::write(foreign.join("notes.txt"), "mine").unwrap();
     let e = stderr(&train(&data, &preset, &foreign, &[]));
-    assert!(e.contains("refusing"), "{e}");
+    assert!(e.contains("refusing") && e.contains("'notes.txt'"), "{e}");
     assert_eq!(
         std::fs::read_to_string(foreign.join("notes.txt")).unwrap(),
         "mine"

@@ -27,6 +27,10 @@ pub enum TrainError {
     /// Writing a file failed (the error names it).
     #[error(transparent)]
     Io(#[from] phi_io::IoError),
+    /// A training directory that holds something other than a run (the rule of every writer
+    /// of phi, [`phi_io::output_dir`]; the error names the entry in the way).
+    #[error(transparent)]
+    Output(Box<phi_io::output_dir::OutputDirError>),
     /// A checkpoint or training directory that cannot be used.
     #[error("'{path}': {reason}", path = path.display())]
     Checkpoint {
@@ -44,6 +48,12 @@ pub enum TrainError {
         /// The loss or gradient at fault.
         reason: String,
     },
+}
+
+impl From<phi_io::output_dir::OutputDirError> for TrainError {
+    fn from(e: phi_io::output_dir::OutputDirError) -> Self {
+        TrainError::Output(Box::new(e))
+    }
 }
 
 impl From<phi_io::TomlError> for TrainError {

@@ -30,11 +30,12 @@ use std::time::Instant;
 
 use phi_core::AutodiffBackend;
 use phi_core::backend::Host;
+use phi_io::output_dir::{Marker, OutputDir, OutputSubdir, Outputs};
 use serde::{Deserialize, Serialize};
 
 use super::checkpoint::{
-    Best, CheckpointState, LossAccumulator, checkpoints, load_average, load_checkpoint,
-    prune_checkpoints, save_best, save_checkpoint,
+    BEST_DIR, Best, CHECKPOINTS_DIR, CheckpointState, LossAccumulator, checkpoints, load_average,
+    load_checkpoint, prune_checkpoints, save_best, save_checkpoint,
 };
 use super::config::{SelectBy, TrainConfig};
 use super::sampler::WindowSpec;
@@ -454,7 +455,6 @@ fn checkpoint_error(path: &Path, reason: impl std::fmt::Display) -> TrainError {
     }
 }
 
-/// A fresh run needs `out` missing or empty.
 /// The lock file of a training directory: the process id of the run that holds it.
 pub const LOCK_FILE: &str = "train.lock";
 
@@ -526,28 +526,39 @@ fn process_runs(pid: u32) -> bool {
     }
 }
 
+/// A fresh run needs `out` missing or empty; one that holds a run is refused with a pointer
+/// to `--resume`, one that holds anything else naming the entry in the way.
 fn check_fresh(out: &Path) -> Result<(), TrainError> {
-    if !out.exists() {
+    if OutputDir::inspect(out, &RUN_OUTPUTS, false)?.holds_nothing() {
         return Ok(());
-    }
-    if !out.is_dir() {
-        return Err(checkpoint_error(out, "exists and is not a directory"));
-    }
-    let mut entries = std::fs::read_dir(out).map_err(|e| checkpoint_error(out, e))?;
-    if entries.next().is_none() {
-        return Ok(());
-    }
-    if out.join(TRAIN_FILE).is_file() {
-        return Err(checkpoint_error(
-            out,
-            "holds a training run already: pass --resume to continue it, or choose another --out",
-        ));
     }
     Err(checkpoint_error(
         out,
-        "is not empty and holds no training run; refusing to write into it: choose another --out",
+        "holds a training run already: pass --resume to continue it, or choose another --out",
     ))
 }
+
+/// What a run writes into its directory, by the rule of every writer of phi
+/// ([`phi_io::output_dir`]): a run is recognised by its `train.json`, and a directory holding
+/// anything else is refused, naming the entry in the way.
+const RUN_OUTPUTS: Outputs = Outputs {
+    command: "phi train",
+    flag: "--out",
+    files: &[TRAIN_FILE, CONFIG_FILE, LOG_FILE, LOCK_FILE],
+    subdirs: &[
+        OutputSubdir {
+            name: CHECKPOINTS_DIR,
+            prefix: "step-",
+            suffix: "",
+        },
+        OutputSubdir {
+            name: BEST_DIR,
+            prefix: "",
+            suffix: "",
+        },
+    ],
+    marker: Some(Marker::json(TRAIN_FILE, "made_by", MADE_BY)),
+};
 
 /// A resumed run needs `out` to hold a run of `phi train` with the same configuration (the
 /// total step count aside), dataset and backend.
