@@ -302,3 +302,35 @@ def test_evaluate_with_a_container_counts_what_leaves_it(model_dir, dataset_dir)
         model.evaluate(swept, types, bounds=[bounds[0], (1, 0)], cell_size=cell)
     with pytest.raises(phi_rs.ModelError, match="axis 0 has 3 values"):
         model.evaluate(swept, types, bounds=[(0, 1, 2), bounds[1]], cell_size=cell)
+
+
+def test_evaluate_over_a_split_is_phi_eval(phi, model_dir, dataset_dir, tmp_path):
+    model = phi_rs.Model.load(model_dir)
+    models = {"open": model, "clamped": model.with_walls("clamp")}
+    table = phi_rs.evaluate(models, dataset_dir, split="train", short_rollout=5)
+    out = tmp_path / "eval"
+    phi("eval", "--model", f"open={model_dir}", "--model", f"clamped={model_dir}",
+        "--model-walls", "clamped=clamp", "--data", dataset_dir, "--split", "train",
+        "--short-rollout", 5, "--sinkhorn-every", 0, "--frame-every", 0, "--out", out,
+        "--backend", "ndarray")
+    record = json.loads((out / "eval.json").read_text())
+    cli = {m["label"]: m["summary"] for m in record["models"]}
+    assert set(table["models"]) == set(cli) == {"open", "clamped"}
+    for name, summary in table["models"].items():
+        assert summary == cli[name], name
+    # Each row is Model.evaluate's dict of that trajectory, against the dataset's container.
+    ds = phi_rs.Dataset(dataset_dir)
+    bounds, cell = ds.metadata["bounds"], ds.metadata["position_scale"]
+    for i, row in enumerate(table["trajectories"]["clamped"]):
+        positions, types = ds["train", i]
+        one = models["clamped"].evaluate(positions, types, short_rollout=5, sinkhorn_every=0,
+                                         density_radius=ds.metadata["default_connectivity_radius"],
+                                         bounds=bounds, cell_size=cell)
+        one.pop("plausible")
+        assert row.pop("index") == i and row.pop("seed") != 0
+        one.pop("index"), one.pop("seed")
+        assert row == one
+    assert len(phi_rs.evaluate(models, dataset_dir, split="train",
+                               trajectories=1)["trajectories"]["open"]) == 1
+    with pytest.raises(phi_rs.DatasetError, match="valid"):
+        phi_rs.evaluate(models, dataset_dir, split="valid")

@@ -51,6 +51,23 @@ def generate_dataset(
     exception in it stops the run, keeping the finished files). Returns ``written``,
     ``skipped``, ``remade`` and ``seconds``. Raises ``DatasetError``."""
 
+def evaluate(
+    models: Dict[str, "Model"],
+    data: Union[str, os.PathLike[str]],
+    split: str = "test",
+    trajectories: Optional[int] = None,
+    short_rollout: int = 20,
+    emd_cost: str = "sqeuclidean",
+    sinkhorn_epsilon: float = 1e-4,
+    sinkhorn_every: int = 0,
+    density_radius: Optional[float] = None,
+) -> Dict[str, Any]:
+    """Evaluates ``{name: Model}`` on the first ``trajectories`` (all) trajectories of a
+    dataset's split as ``phi eval`` does, against the dataset's container: ``{"models": {name:
+    summary}, "trajectories": {name: [evaluation, ...]}}``, each summary a row of ``phi eval``'s
+    table (``plausibility.plausible`` counts plausible rollouts), each evaluation
+    ``Model.evaluate``'s dict. Raises ``DatasetError`` and ``ModelError``."""
+
 def merge_dataset(
     out: Union[str, os.PathLike[str]],
     shards: Sequence[Union[str, os.PathLike[str]]],
