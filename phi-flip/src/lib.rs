@@ -24,7 +24,9 @@ pub use random::{
     BlockDraw, OBSTACLE_ATTEMPTS, ObstacleDraw, ParticleTrajectory, RandomScene, RandomSceneParams,
     SceneVariant, cell_centres, generate_random_scene, record_trajectory,
 };
-pub use record::{RecordedFrame, Recording, SceneRun, TrajectoryArrays, run_scene};
+pub use record::{
+    RecordedFrame, Recording, SceneRun, TrajectoryArrays, run_scene, run_scene_checked,
+};
 pub use scene::{
     DomainSpec, InflowSpec, LiquidSpec, PlacementSpec, RunSpec, Scene, SceneSetup, Scheme,
     SimulationSpec, SolverSpec, TransferSpec,

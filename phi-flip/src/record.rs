@@ -309,14 +309,31 @@ pub fn run_scene<B: LatticeKernels>(
     steps: Option<usize>,
     device: &B::Device,
 ) -> Result<Recording> {
+    run_scene_checked::<B, crate::FlipError>(scene, origin, steps, device, |_| Ok(()))
+}
+
+/// [`run_scene`], calling `check(step)` after each step (counted from 1): an error from it
+/// stops the run and is returned (a front end's check for Ctrl-C). The states are those of
+/// [`run_scene`], bit for bit.
+///
+/// # Errors
+/// As [`run_scene`], and `check`'s.
+pub fn run_scene_checked<B: LatticeKernels, E: From<crate::FlipError>>(
+    scene: &Scene,
+    origin: &str,
+    steps: Option<usize>,
+    device: &B::Device,
+    mut check: impl FnMut(usize) -> std::result::Result<(), E>,
+) -> std::result::Result<Recording, E> {
     let mut run = SceneRun::<B>::new(scene, origin, device)?;
     let steps = steps.unwrap_or(run.scene_steps());
     let mut recording = run.recording();
     recording.reserve(steps.saturating_add(1));
     recording.push(run.particles());
-    for _ in 0..steps {
+    for step in 1..=steps {
         run.step()?;
         recording.push(run.particles());
+        check(step)?;
     }
     Ok(recording)
 }

@@ -107,6 +107,10 @@ pub enum Error {
     /// A panic inside the library, caught at the boundary.
     #[error("internal error in phi: {0}")]
     Panic(String),
+    /// An exception from Python while the call ran (`KeyboardInterrupt` from a check of the
+    /// signals between steps), raised again as it is.
+    #[error("{0}")]
+    Python(PyErr),
 }
 
 impl Error {
@@ -124,6 +128,7 @@ impl From<Error> for PyErr {
     fn from(error: Error) -> PyErr {
         let message = error.to_string();
         match error {
+            Error::Python(error) => error,
             Error::Flip(phi_flip::FlipError::Scene { .. }) => SceneError::new_err(message),
             Error::Flip(_) => SimulationError::new_err(message),
             Error::Data(_) | Error::Generate(_) => DatasetError::new_err(message),

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use phi_core::Backend;
-use phi_flip::{Recording, Scene, run_scene};
+use phi_flip::{Recording, Scene, run_scene_checked};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
 
@@ -49,8 +49,10 @@ pub fn simulate<'py>(
     let backend = backend.to_string();
     let recording = detached(py, move || {
         let (scene, origin) = source.read()?;
+        // Ctrl-C stops the run between steps: Python's signal handlers run only when asked.
+        let interrupted = |_| Python::attach(|py| py.check_signals()).map_err(Error::Python);
         with_backend!(backend.as_str(), B => {
-            Ok(run_scene::<B>(&scene, &origin, steps, &B::default_device())?)
+            run_scene_checked::<B, Error>(&scene, &origin, steps, &B::default_device(), interrupted)
         })
     })?;
     trajectory_dict(py, &recording)

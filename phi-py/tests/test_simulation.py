@@ -156,6 +156,18 @@ def test_ctrl_c_interrupts_a_long_step_at_a_completed_step():
     assert sim.steps == done + 1
 
 
+def test_ctrl_c_interrupts_simulate():
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    timer = threading.Timer(0.3, _thread.interrupt_main)
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            phi_rs.simulate(SCENE, steps=10**5)
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, previous)
+
+
 def test_two_simulations_step_in_two_threads():
     expected = phi_rs.simulate(SCENE, steps=3)
     sims = [phi_rs.Simulation(SCENE) for _ in range(2)]
