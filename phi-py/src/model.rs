@@ -10,7 +10,7 @@ use phi_gns::model::{
     ConfigOverrides, Gns, GnsConfig, GnsKernels, GraphBatch, MODEL_FILE, ModelSpec, WEIGHTS_FILE,
     Walls, load_model, save_model,
 };
-use phi_gns::rollout::{Rollout, RolloutRange, input_window, rollout_positions};
+use phi_gns::rollout::{Rollout, RolloutRange, input_window, rollout};
 use pyo3::prelude::*;
 
 use crate::arrays::{host_array, shape_text, to_numpy};
@@ -52,18 +52,36 @@ fn load_on<B: GnsKernels>(dir: &Path) -> Result<Gns<B>, Error> {
     Ok(load_model::<B>(dir, &B::default_device())?)
 }
 
-/// Rolls `model` out on `trajectory` over `range`: `[steps * N * dim]`.
+/// Rolls `model` out on `trajectory` over `range`: `[steps * N * dim]`. Python's signals are
+/// checked after every step, so Ctrl-C stops it with `KeyboardInterrupt`.
 fn rollout_on<B: GnsKernels>(
     model: &Gns<B>,
     trajectory: &Trajectory,
     range: RolloutRange,
 ) -> Result<Vec<f32>, Error> {
-    Ok(rollout_positions(
+    let mut frames = Vec::with_capacity(range.steps * trajectory.particles * trajectory.dim);
+    let mut interrupted = None;
+    let done = rollout(
         model,
         trajectory,
         range,
         &B::default_device(),
-    )?)
+        |step, positions| {
+            frames.extend_from_slice(positions);
+            Python::attach(|py| py.check_signals()).map_err(|e| {
+                interrupted = Some(e);
+                phi_gns::model::ModelError::Input {
+                    what: "rollout",
+                    reason: format!("interrupted after step {step}"),
+                }
+            })
+        },
+    );
+    if let Some(e) = interrupted {
+        return Err(Error::Python(e));
+    }
+    done?;
+    Ok(frames)
 }
 
 /// Evaluates `model` on `trajectory` as `phi eval` does.

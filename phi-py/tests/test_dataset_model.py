@@ -1,7 +1,10 @@
 """phi_rs.Dataset reads what `phi dataset generate` wrote; phi_rs.Model rolls out as `phi
 rollout` does."""
 
+import _thread
 import json
+import signal
+import threading
 
 import numpy as np
 import pytest
@@ -334,3 +337,19 @@ def test_evaluate_over_a_split_is_phi_eval(phi, model_dir, dataset_dir, tmp_path
                                trajectories=1)["trajectories"]["open"]) == 1
     with pytest.raises(phi_rs.DatasetError, match="valid"):
         phi_rs.evaluate(models, dataset_dir, split="valid")
+
+
+def test_ctrl_c_interrupts_a_rollout(model_dir, dataset_dir):
+    model = phi_rs.Model.load(model_dir)
+    positions, types = phi_rs.Dataset(dataset_dir)["train", 0]
+    # A trajectory long enough to run for seconds: the first frame held still.
+    still = np.repeat(positions[:1], 20_000, axis=0)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    timer = threading.Timer(0.3, _thread.interrupt_main)
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            model.rollout(still, types)
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, previous)
