@@ -203,7 +203,7 @@ fn eval_options(
 ///     DatasetError: an unreadable dataset or split.
 ///     ModelError: a model that does not fit the dataset, bad options.
 ///
-/// The GIL is released while it runs.
+/// The GIL is released while it runs; Ctrl-C stops it after the trajectory under way.
 #[pyfunction]
 #[pyo3(signature = (models, data, split = "test", trajectories = None, short_rollout = 20, emd_cost = "sqeuclidean", sinkhorn_epsilon = 1e-4, sinkhorn_every = 0, density_radius = None))]
 #[allow(clippy::too_many_arguments)] // Python's keyword arguments
@@ -244,6 +244,8 @@ pub fn evaluate<'py>(
                 let (trajectory, _) = dataset.read_with_stats(split, index)?;
                 evaluations
                     .push(on_model!(&model.inner, m => evaluate_on(m, &trajectory, &options))?);
+                // Ctrl-C stops the evaluation between trajectories.
+                Python::attach(|py| py.check_signals()).map_err(Error::Python)?;
             }
             let summary = ModelSummary::of(&evaluations, &metadata.acc_std);
             let unwritable = |e: serde_json::Error| {
