@@ -626,7 +626,6 @@ impl GifWriter {
         &self.path
     }
 
-
     /// Moves what the encoder produced so far to the file and flushes it.
     fn flush_encoded(&mut self) -> Result<(), OutputError> {
         let Some(encoder) = self.encoder.as_mut() else {

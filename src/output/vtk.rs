@@ -76,7 +76,6 @@ impl VtkSeries {
         self
     }
 
-
     /// The collection file.
     #[cfg(test)]
     pub(crate) fn pvd_path(&self) -> &Path {

@@ -4,7 +4,11 @@ use crate::error::{Result, TensorError};
 
 /// The NumPy broadcast of two shapes: aligned at the trailing axis, missing leading axes count
 /// as 1, and an axis of length 1 stretches to the other's length.
-pub(crate) fn broadcast_shapes(op: &'static str, lhs: &[usize], rhs: &[usize]) -> Result<Vec<usize>> {
+pub(crate) fn broadcast_shapes(
+    op: &'static str,
+    lhs: &[usize],
+    rhs: &[usize],
+) -> Result<Vec<usize>> {
     let rank = lhs.len().max(rhs.len());
     let mut out = vec![0; rank];
     for (i, length) in out.iter_mut().enumerate() {
