@@ -426,6 +426,10 @@ impl Model {
     ///     particle_type: int64 ``[N]`` (0 = obstacle, 1 = liquid).
     ///     steps: predicted frames; ``None`` runs to the trajectory's last frame.
     ///     start: the last frame of the input window; ``None`` is ``C``, the first possible.
+    ///     kinematic: float32 ``[S, N, d]``, where the kinematic particles are at the ``S``
+    ///         frames after ``positions`` (only their rows are read): a rollout of a window
+    ///         (``positions`` of ``C + 1`` frames) with no ground truth after it. Obstacles
+    ///         that stay put: ``np.repeat(window[-1:], S, axis=0)``.
     ///
     /// Returns:
     ///     float32 ``[steps, N, d]``: the predicted frames ``start + 1 ..= start + steps``.
@@ -434,8 +438,8 @@ impl Model {
     ///     ModelError: arrays of the wrong shape or dimension, a range past the trajectory's
     ///         end, a non-finite prediction (naming the step and the particle).
     ///
-    /// The GIL is released while the model runs.
-    #[pyo3(signature = (positions, particle_type, steps = None, start = None))]
+    /// The GIL is released while the model runs; Ctrl-C stops it between steps.
+    #[pyo3(signature = (positions, particle_type, steps = None, start = None, kinematic = None))]
     fn rollout<'py>(
         &self,
         py: Python<'py>,
@@ -443,8 +447,32 @@ impl Model {
         particle_type: &Bound<'py, PyAny>,
         steps: Option<usize>,
         start: Option<usize>,
+        kinematic: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (frames, n, d, values, types) = trajectory_arrays(positions, particle_type, "rollout")?;
+        let (mut frames, n, d, mut values, types) =
+            trajectory_arrays(positions, particle_type, "rollout")?;
+        if let Some(kinematic) = kinematic {
+            let (shape, after) =
+                host_array::<f32>(kinematic, "float32", Area::Model, "rollout: kinematic")?;
+            let [more, kn, kd] = shape[..] else {
+                return Err(Error::argument(
+                    Area::Model,
+                    "rollout: kinematic",
+                    format!("shape {}: expected [S, {n}, {d}]", shape_text(&shape)),
+                )
+                .into());
+            };
+            if (kn, kd) != (n, d) {
+                return Err(Error::argument(
+                    Area::Model,
+                    "rollout: kinematic",
+                    format!("shape {}: expected [S, {n}, {d}]", shape_text(&shape)),
+                )
+                .into());
+            }
+            frames += more;
+            values.extend_from_slice(&after);
+        }
         let c = self.input_velocities();
         let start = start.unwrap_or(c);
         let steps = steps.unwrap_or_else(|| frames.saturating_sub(start + 1));

@@ -353,3 +353,23 @@ def test_ctrl_c_interrupts_a_rollout(model_dir, dataset_dir):
     finally:
         timer.cancel()
         signal.signal(signal.SIGINT, previous)
+
+
+def test_rollout_of_a_window_with_kinematic_frames(model_dir, dataset_dir):
+    model = phi_rs.Model.load(model_dir)
+    positions, types = phi_rs.Dataset(dataset_dir)["train", 0]
+    c = model.input_velocities
+    # The window and the ground truth's later frames as `kinematic`: the trajectory's rollout.
+    window, later = positions[:c + 1], positions[c + 1:]
+    assert np.array_equal(model.rollout(window, types, kinematic=later),
+                          model.rollout(positions, types))
+    # Obstacles held where the window leaves them; the liquid's rows of `kinematic` unread.
+    still = np.repeat(window[-1:], 4, axis=0)
+    scrambled = still.copy()
+    scrambled[:, types == 1] = 123.0
+    held = model.rollout(window, types, kinematic=still)
+    assert held.shape == (4, types.shape[0], 2)
+    assert np.array_equal(held, model.rollout(window, types, kinematic=scrambled))
+    assert np.array_equal(held[:, types == 0], still[:, types == 0])
+    with pytest.raises(phi_rs.ModelError, match=r"kinematic: shape \(4, 3, 2\)"):
+        model.rollout(window, types, kinematic=still[:, :3])

@@ -265,9 +265,12 @@ class Model:
         particle_type: npt.ArrayLike,
         steps: Optional[int] = None,
         start: Optional[int] = None,
+        kinematic: Optional[npt.ArrayLike] = None,
     ) -> npt.NDArray[np.float32]:
         """Rolls the model out from frame ``start`` (default ``C``) of a ground-truth trajectory
-        ``[T, N, d]``; returns the predicted frames ``[steps, N, d]``."""
+        ``[T, N, d]``; returns the predicted frames ``[steps, N, d]``. ``kinematic``
+        ``[S, N, d]`` appends the kinematic particles' next frames: a window of ``C + 1``
+        frames rolled out with no ground truth after it."""
     def evaluate(
         self,
         positions: npt.ArrayLike,
