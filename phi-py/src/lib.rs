@@ -21,6 +21,7 @@ mod dataset;
 mod emd;
 mod error;
 mod evaluate;
+mod evaluate_split;
 mod generate;
 #[cfg(feature = "burn")]
 mod gradient;
@@ -42,7 +43,7 @@ fn _phi_rs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate::simulate, m)?)?;
     m.add_function(wrap_pyfunction!(generate::generate_dataset, m)?)?;
     m.add_function(wrap_pyfunction!(generate::merge_dataset, m)?)?;
-    m.add_function(wrap_pyfunction!(evaluate::evaluate, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluate_split::evaluate, m)?)?;
     m.add_function(wrap_pyfunction!(emd::emd, m)?)?;
     m.add_function(wrap_pyfunction!(metrics::sinkhorn, m)?)?;
     m.add_function(wrap_pyfunction!(metrics::position_mse, m)?)?;
