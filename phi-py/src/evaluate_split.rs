@@ -34,7 +34,8 @@ use crate::model::{Loaded, Model, on_model};
 ///     DatasetError: an unreadable dataset or split.
 ///     ModelError: a model that does not fit the dataset, bad options.
 ///
-/// The GIL is released while it runs; Ctrl-C stops it after the trajectory under way.
+/// The GIL is released while it runs; Ctrl-C stops it after the trajectory under way (each
+/// trajectory is read once, for every model).
 #[pyfunction]
 #[pyo3(signature = (models, data, split = "test", trajectories = None, short_rollout = 20, emd_cost = "sqeuclidean", sinkhorn_epsilon = 1e-4, sinkhorn_every = 0, density_radius = None))]
 #[allow(clippy::too_many_arguments)] // Python's keyword arguments
@@ -67,28 +68,31 @@ pub fn evaluate<'py>(
         });
         let count = dataset.split_len(split)?;
         let count = trajectories.map_or(count, |t| t.min(count));
-        let (mut summaries, mut rows) = (serde_json::Map::new(), serde_json::Map::new());
-        for (name, model) in &models {
-            let model = model.get();
-            let mut evaluations = Vec::with_capacity(count);
-            for index in 0..count {
-                let (trajectory, _) = dataset.read_with_stats(split, index)?;
-                evaluations
-                    .push(on_model!(&model.inner, m => evaluate_on(m, &trajectory, &options))?);
-                // Ctrl-C stops the evaluation between trajectories.
-                Python::attach(|py| py.check_signals()).map_err(Error::Python)?;
+        // Each trajectory is read once and evaluated by every model.
+        let mut evaluations: Vec<Vec<_>> =
+            models.iter().map(|_| Vec::with_capacity(count)).collect();
+        for index in 0..count {
+            let (trajectory, _) = dataset.read_with_stats(split, index)?;
+            for (model, done) in models.values().zip(&mut evaluations) {
+                let model = model.get();
+                done.push(on_model!(&model.inner, m => evaluate_on(m, &trajectory, &options))?);
             }
-            let summary = ModelSummary::of(&evaluations, &metadata.acc_std);
-            let unwritable = |e: serde_json::Error| {
-                Error::argument(Area::Model, "evaluate", format!("cannot be written: {e}"))
-            };
+            // Ctrl-C stops the evaluation between trajectories.
+            Python::attach(|py| py.check_signals()).map_err(Error::Python)?;
+        }
+        let unwritable = |e: serde_json::Error| {
+            Error::argument(Area::Model, "evaluate", format!("cannot be written: {e}"))
+        };
+        let (mut summaries, mut rows) = (serde_json::Map::new(), serde_json::Map::new());
+        for (name, evaluations) in models.keys().zip(&evaluations) {
+            let summary = ModelSummary::of(evaluations, &metadata.acc_std);
             summaries.insert(
                 name.clone(),
                 serde_json::to_value(&summary).map_err(unwritable)?,
             );
             rows.insert(
                 name.clone(),
-                serde_json::to_value(&evaluations).map_err(unwritable)?,
+                serde_json::to_value(evaluations).map_err(unwritable)?,
             );
         }
         let table = serde_json::json!({ "models": summaries, "trajectories": rows });

@@ -8,7 +8,7 @@ use phi_gns::model::{
     ConfigOverrides, Gns, GnsConfig, GnsKernels, GraphBatch, MODEL_FILE, ModelSpec, WEIGHTS_FILE,
     Walls, load_model, save_model,
 };
-use phi_gns::rollout::{Rollout, RolloutRange, input_window, rollout};
+use phi_gns::rollout::{Rollout, RolloutRange, TrajectoryRollout, input_window};
 use pyo3::prelude::*;
 
 use crate::arrays::{host_array, shape_text, to_numpy};
@@ -60,27 +60,10 @@ fn rollout_on<B: GnsKernels>(
     range: RolloutRange,
 ) -> Result<Vec<f32>, Error> {
     let mut frames = Vec::with_capacity(range.steps * trajectory.particles * trajectory.dim);
-    let mut interrupted = None;
-    let done = rollout(
-        model,
-        trajectory,
-        range,
-        &B::default_device(),
-        |step, positions| {
-            frames.extend_from_slice(positions);
-            Python::attach(|py| py.check_signals()).map_err(|e| {
-                interrupted = Some(e);
-                phi_gns::model::ModelError::Input {
-                    what: "rollout",
-                    reason: format!("interrupted after step {step}"),
-                }
-            })
-        },
-    );
-    if let Some(e) = interrupted {
-        return Err(Error::Python(e));
+    for frame in TrajectoryRollout::new(model, trajectory, range, &B::default_device())? {
+        frames.extend_from_slice(&frame?.positions);
+        Python::attach(|py| py.check_signals()).map_err(Error::Python)?;
     }
-    done?;
     Ok(frames)
 }
 
@@ -454,22 +437,17 @@ impl Model {
         if let Some(kinematic) = kinematic {
             let (shape, after) =
                 host_array::<f32>(kinematic, "float32", Area::Model, "rollout: kinematic")?;
-            let [more, kn, kd] = shape[..] else {
-                return Err(Error::argument(
-                    Area::Model,
-                    "rollout: kinematic",
-                    format!("shape {}: expected [S, {n}, {d}]", shape_text(&shape)),
-                )
-                .into());
+            let more = match shape[..] {
+                [more, kn, kd] if (kn, kd) == (n, d) => more,
+                _ => {
+                    return Err(Error::argument(
+                        Area::Model,
+                        "rollout: kinematic",
+                        format!("shape {}: expected [S, {n}, {d}]", shape_text(&shape)),
+                    )
+                    .into());
+                }
             };
-            if (kn, kd) != (n, d) {
-                return Err(Error::argument(
-                    Area::Model,
-                    "rollout: kinematic",
-                    format!("shape {}: expected [S, {n}, {d}]", shape_text(&shape)),
-                )
-                .into());
-            }
             frames += more;
             values.extend_from_slice(&after);
         }
