@@ -117,11 +117,17 @@ fn layer_norm_rows_portable(x: &mut [f32], gamma: &[f32], beta: &[f32], eps: f32
     }
 }
 
-/// `max(x, 0)` in place, keeping NaN (see [`phi_core::backend::relu`]).
+/// `max(x, 0)` in place, keeping NaN: the bits of [`phi_core::backend::relu`].
+///
+/// Written as a mask over the bits, so that every element is stored: the plain `if v < 0 { 0 }`
+/// compiles to a masked store of the zeros (`vmaskmovps`), which AMD's cores run in microcode,
+/// about 7 % of a thesis-size inference step.
 #[inline(always)]
 fn relu_in_place_portable(x: &mut [f32]) {
     for v in x {
-        *v = phi_core::backend::relu(*v);
+        // All ones unless v < 0 (false for NaN and -0.0, which pass through unchanged).
+        let keep = ((*v < 0.0) as u32).wrapping_sub(1);
+        *v = f32::from_bits(v.to_bits() & keep);
     }
 }
 
@@ -668,5 +674,41 @@ pub(super) fn gather_rows(x: &[f32], width: usize, index: &[i64]) -> Vec<f32> {
 fn add_assign(out: &mut [f32], x: &[f32]) {
     for (o, v) in out.iter_mut().zip(x) {
         *o += v;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::relu_in_place;
+
+    /// The masked ReLU gives the bits of the scalar one on every special value (NaN with its
+    /// payload and sign, ±0, ±inf, subnormals) at every position of a vector and its remainder.
+    #[test]
+    fn relu_in_place_has_the_bits_of_the_scalar_relu() {
+        let specials = [
+            f32::NAN,
+            -f32::NAN,
+            f32::from_bits(0x7fc0_1234),
+            0.0,
+            -0.0,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::MIN_POSITIVE / 2.0,
+            -f32::MIN_POSITIVE / 2.0,
+            f32::MAX,
+            f32::MIN,
+            1.5,
+            -2.25,
+        ];
+        for len in [1, 7, 8, 15, 16, 17, 33, 100] {
+            for shift in 0..specials.len() {
+                let x: Vec<f32> = (0..len).map(|i| specials[(i + shift) % specials.len()]).collect();
+                let mut y = x.clone();
+                relu_in_place(&mut y);
+                for (a, b) in x.iter().zip(&y) {
+                    assert_eq!(phi_core::backend::relu(*a).to_bits(), b.to_bits(), "input {a:?}");
+                }
+            }
+        }
     }
 }
