@@ -32,7 +32,11 @@ fn summary(times: &mut [f64]) -> (f64, f64) {
     (times[times.len() / 2], times[0])
 }
 
+#[global_allocator]
+static ALLOCATOR: phi::allocator::Allocator = phi::allocator::Allocator;
+
 fn main() -> Result<()> {
+    phi::allocator::configure();
     let args = Args::parse();
     anyhow::ensure!(args.steps > 0, "time at least one step");
     let scene = Scene::from_file(&args.scene)

@@ -198,7 +198,11 @@ fn run<B: GnsKernels>(args: &Args) -> Result<()> {
     Ok(())
 }
 
+#[global_allocator]
+static ALLOCATOR: phi::allocator::Allocator = phi::allocator::Allocator;
+
 fn main() -> Result<()> {
+    phi::allocator::configure();
     let args = Args::parse();
     phi::with_backend!(args.backend, B => run::<B>(&args))
 }

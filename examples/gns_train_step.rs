@@ -296,7 +296,11 @@ fn write_input<B: GnsKernels>(
     Ok(())
 }
 
+#[global_allocator]
+static ALLOCATOR: phi::allocator::Allocator = phi::allocator::Allocator;
+
 fn main() -> Result<()> {
+    phi::allocator::configure();
     let args = Args::parse();
     phi::with_autodiff_backend!(args.backend, B => run::<B>(&args), otherwise => {
         bail!("--backend {} has no autodiff; use burn or tch", args.backend)

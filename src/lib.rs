@@ -7,6 +7,7 @@
 //! - [`phi_gns`]: Graph Network-based Simulators;
 //! - [`phi_dataset`]: the FLIP datasets they learn from (generation, merging).
 
+pub mod allocator;
 pub mod backends;
 pub mod cli;
 pub mod dataset;

@@ -116,7 +116,11 @@ enum Command {
     Eval(phi::gns::eval::EvalArgs),
 }
 
+#[global_allocator]
+static ALLOCATOR: phi::allocator::Allocator = phi::allocator::Allocator;
+
 fn main() -> ExitCode {
+    phi::allocator::configure();
     die_quietly_on_broken_pipe();
     let cli = Cli::parse();
     if cli.verbose {
