@@ -519,6 +519,45 @@ fn a_diverging_run_stops_naming_the_step_and_keeps_the_last_good_checkpoint() {
     assert!(kept.join("state.json").is_file(), "{e}");
 }
 
+/// The lever and GPU presets parse and read back, and their names say what they hold: `mirror`
+/// mirror augmentation, `average` the weight average, `two-step` the two-step loss, `noise` the
+/// random-walk input noise, `walls` no boundary features.
+#[test]
+fn every_lever_and_gpu_preset_parses_and_holds_what_its_name_says() {
+    use phi::phi_gns::train::TrainConfig;
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/gns");
+    let mut seen = 0;
+    for folder in ["levers", "gpu"] {
+        for entry in std::fs::read_dir(root.join(folder)).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_none_or(|e| e != "toml") {
+                continue;
+            }
+            let c = TrainConfig::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
+            let name = path.file_stem().unwrap().to_string_lossy().into_owned();
+            let at = path.display();
+            if name.contains("mirror") {
+                assert!(c.training.mirror, "{at}");
+            }
+            if name.contains("average") {
+                assert!(c.training.ema_decay.is_some(), "{at}");
+            }
+            if name.contains("two-step") {
+                assert_eq!(c.training.extra_steps, 1, "{at}");
+            }
+            if name.contains("noise") {
+                assert!(c.model.noise_std > 0.0, "{at}");
+            }
+            if name.contains("walls") {
+                assert!(!c.model.boundary_features, "{at}");
+            }
+            assert_eq!(TrainConfig::from_toml(&c.to_toml(), "stored").unwrap(), c, "{at}");
+            seen += 1;
+        }
+    }
+    assert!(seen >= 10, "only {seen} presets in configs/gns/levers and gpu");
+}
+
 #[test]
 fn every_preset_parses_and_the_full_scale_ones_are_the_thesis_recipe() {
     use phi::phi_gns::train::TrainConfig;
