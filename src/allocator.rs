@@ -73,7 +73,10 @@ mod tests {
             .unwrap();
         let stdout = String::from_utf8_lossy(&child.stdout);
         assert!(child.status.success(), "the child test failed:\n{stdout}");
-        assert!(stdout.contains("1 passed"), "the child ran no test:\n{stdout}");
+        assert!(
+            stdout.contains("1 passed"),
+            "the child ran no test:\n{stdout}"
+        );
     }
 
     /// Without the variable, `configure` turns the purge off.

@@ -551,11 +551,18 @@ fn every_lever_and_gpu_preset_parses_and_holds_what_its_name_says() {
             if name.contains("walls") {
                 assert!(!c.model.boundary_features, "{at}");
             }
-            assert_eq!(TrainConfig::from_toml(&c.to_toml(), "stored").unwrap(), c, "{at}");
+            assert_eq!(
+                TrainConfig::from_toml(&c.to_toml(), "stored").unwrap(),
+                c,
+                "{at}"
+            );
             seen += 1;
         }
     }
-    assert!(seen >= 10, "only {seen} presets in configs/gns/levers and gpu");
+    assert!(
+        seen >= 10,
+        "only {seen} presets in configs/gns/levers and gpu"
+    );
 }
 
 #[test]

@@ -702,11 +702,17 @@ mod tests {
         ];
         for len in [1, 7, 8, 15, 16, 17, 33, 100] {
             for shift in 0..specials.len() {
-                let x: Vec<f32> = (0..len).map(|i| specials[(i + shift) % specials.len()]).collect();
+                let x: Vec<f32> = (0..len)
+                    .map(|i| specials[(i + shift) % specials.len()])
+                    .collect();
                 let mut y = x.clone();
                 relu_in_place(&mut y);
                 for (a, b) in x.iter().zip(&y) {
-                    assert_eq!(phi_core::backend::relu(*a).to_bits(), b.to_bits(), "input {a:?}");
+                    assert_eq!(
+                        phi_core::backend::relu(*a).to_bits(),
+                        b.to_bits(),
+                        "input {a:?}"
+                    );
                 }
             }
         }
