@@ -3,14 +3,15 @@
 //! share of particles per neighbour count as a heat map ([`heat_map`]).
 //!
 //! Neighbours of a liquid particle are the other particles (liquid or obstacle) within the
-//! connectivity radius in stored units (the GNS graph's edges, without the self-edge). They are
-//! found with a cell list of cell size `radius`: each particle looks at the 3×3 cells around
-//! its own, `O(n)` per frame.
+//! connectivity radius in stored units: the GNS graph's edges without the self-edge, counted by
+//! [`phi_gns::graph::neighbour_counts`] on the graph's own cell list, `O(n)` time and memory per
+//! frame.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use phi_gns::data::{Dataset, LIQUID, METADATA_FILE, Trajectory};
+use phi_gns::graph::neighbour_counts;
 
 use crate::memory::check_memory;
 use crate::output::target::{OutputFile, check_file};
@@ -129,38 +130,35 @@ pub fn dataset_stats(options: &StatsOptions) -> Result<StatsReport> {
     let available = crate::cli::split_len(&dataset, &options.dir, &split)?;
     let count = available.min(options.limit.max(1));
     let frames = metadata.frames();
-    // The cell list of each worker (two arrays of one usize per cell) and the histograms of every
-    // trajectory measured.
-    let cells: f64 = metadata
-        .bounds
-        .iter()
-        .map(|[lo, hi]| ((hi - lo) / f64::from(options.radius)).ceil().max(1.0) + 2.0)
-        .product();
-    let workers = rayon::current_num_threads().min(count) as f64;
-    let word = std::mem::size_of::<usize>() as f64;
+    // The histograms of every trajectory measured and their sum; a worker's cell list and counts
+    // are O(particles).
     let histograms = (count * frames) as f64 * (MAX_NEIGHBOURS + 1) as f64 * 8.0 * 2.0;
-    let estimate = workers * 2.0 * word * (cells + 1.0) + histograms;
     check_memory(
         &format!(
-            "--radius {} over the bounds {:?} of {} ({cells:.3e} cells)",
-            options.radius,
-            metadata.bounds,
+            "the neighbour histograms of {count} {} of {frames} frames (--trajectories; split \
+             {split:?} of {})",
+            if count == 1 {
+                "trajectory"
+            } else {
+                "trajectories"
+            },
             options.dir.join(METADATA_FILE).display()
         ),
-        estimate.min(u128::MAX as f64) as u128,
+        histograms.min(u128::MAX as f64) as u128,
     )?;
-    let bounds: Vec<[f32; 2]> = metadata
-        .bounds
-        .iter()
-        .map(|&[lo, hi]| [lo as f32, hi as f32])
-        .collect();
     let bar = crate::progress::count_bar(count, "trajectories", options.progress);
     let per_trajectory: Vec<(usize, usize, Vec<Vec<u64>>)> = (0..count)
         .into_par_iter()
         .map(|index| -> Result<_> {
             let (trajectory, _) = dataset.read_with_stats(&split, index)?;
             let liquid = trajectory.liquid_particles();
-            let histogram = neighbour_histogram(&trajectory, &bounds, options.radius);
+            let histogram =
+                neighbour_histogram(&trajectory, options.radius).with_context(|| {
+                    format!(
+                        "trajectory {index} of split {split:?} in {}",
+                        options.dir.display()
+                    )
+                })?;
             bar.inc(1);
             Ok((liquid, trajectory.particles - liquid, histogram))
         })
@@ -249,89 +247,28 @@ pub fn heat_map(report: &StatsReport, radius: f32) -> Result<HeatMap> {
 }
 
 /// Per frame of `trajectory`, how many liquid particles have `k` neighbours within `radius`.
-pub fn neighbour_histogram(
+///
+/// # Errors
+/// A non-finite position, or a radius that is not positive and finite.
+pub(crate) fn neighbour_histogram(
     trajectory: &Trajectory,
-    bounds: &[[f32; 2]],
     radius: f32,
-) -> Vec<Vec<u64>> {
-    let n = trajectory.particles;
-    let d = trajectory.dim;
+) -> Result<Vec<Vec<u64>>, phi_gns::graph::GraphError> {
     let liquid: Vec<bool> = trajectory
         .particle_type
         .iter()
         .map(|&t| t == LIQUID)
         .collect();
-    // One cell of margin around the bounds catches particles that left them slightly.
-    let cells: Vec<usize> = bounds
-        .iter()
-        .map(|[lo, hi]| (((hi - lo) / radius).ceil() as usize).clamp(1, usize::MAX - 2) + 2)
-        .collect();
-    let cell_of = |p: &[f32]| -> Vec<usize> {
-        (0..d)
-            .map(|a| {
-                let c = ((p[a] - bounds[a][0]) / radius).floor() + 1.0;
-                (c.max(0.0) as usize).min(cells[a] - 1)
-            })
-            .collect()
-    };
-    let flat = |c: &[usize]| c.iter().zip(&cells).fold(0, |acc, (&c, &n)| acc * n + c);
-    let cell_count: usize = cells.iter().product();
-    let r2 = radius * radius;
-    let mut start = vec![0usize; cell_count + 1];
-    let mut order = vec![0usize; n];
-    let mut cell_index = vec![0usize; n];
-    let mut out = Vec::with_capacity(trajectory.frames);
-    for t in 0..trajectory.frames {
-        let frame = trajectory.frame(t);
-        // Counting sort of the particles by cell.
-        start.iter_mut().for_each(|s| *s = 0);
-        for i in 0..n {
-            cell_index[i] = flat(&cell_of(&frame[i * d..(i + 1) * d]));
-            start[cell_index[i] + 1] += 1;
-        }
-        for c in 0..cell_count {
-            start[c + 1] += start[c];
-        }
-        let mut fill = start.clone();
-        for i in 0..n {
-            order[fill[cell_index[i]]] = i;
-            fill[cell_index[i]] += 1;
-        }
-        let mut histogram = vec![0u64; MAX_NEIGHBOURS + 1];
-        for i in (0..n).filter(|&i| liquid[i]) {
-            let p = &frame[i * d..(i + 1) * d];
-            let home = cell_of(p);
-            let mut found = 0usize;
-            for offset in 0..3usize.pow(d as u32) {
-                let mut c = home.clone();
-                let mut rest = offset;
-                let mut inside = true;
-                for (a, ca) in c.iter_mut().enumerate() {
-                    let step = rest % 3;
-                    rest /= 3;
-                    match (*ca + step).checked_sub(1) {
-                        Some(v) if v < cells[a] => *ca = v,
-                        _ => inside = false,
-                    }
-                }
-                if !inside {
-                    continue;
-                }
-                let k = flat(&c);
-                for &j in &order[start[k]..start[k + 1]] {
-                    if j == i {
-                        continue;
-                    }
-                    let q = &frame[j * d..(j + 1) * d];
-                    let dist2: f32 = p.iter().zip(q).map(|(a, b)| (a - b) * (a - b)).sum();
-                    found += usize::from(dist2 <= r2);
-                }
+    (0..trajectory.frames)
+        .map(|t| {
+            let counts = neighbour_counts(trajectory.frame(t), trajectory.dim, f64::from(radius))?;
+            let mut histogram = vec![0u64; MAX_NEIGHBOURS + 1];
+            for (&count, _) in counts.iter().zip(&liquid).filter(|(_, l)| **l) {
+                histogram[count.min(MAX_NEIGHBOURS)] += 1;
             }
-            histogram[found.min(MAX_NEIGHBOURS)] += 1;
-        }
-        out.push(histogram);
-    }
-    out
+            Ok(histogram)
+        })
+        .collect()
 }
 
 /// Mean, percentiles and maximum of a histogram of counts.
@@ -438,4 +375,47 @@ pub(crate) fn format_report(report: &StatsReport, dir: &Path, radius: f32, every
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use phi_gns::data::OBSTACLE;
+
+    use super::*;
+
+    #[test]
+    fn neighbour_histograms_match_brute_force() {
+        // Two frames of 300 pseudo-random particles, a third of them obstacles.
+        let mut state = 12345u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let n = 300;
+        let position: Vec<f32> = (0..2 * n * 2).map(|_| 0.05 + 0.9 * next()).collect();
+        let types: Vec<i64> = (0..n)
+            .map(|i| if i % 3 == 0 { OBSTACLE } else { LIQUID })
+            .collect();
+        let t = Trajectory::new(2, position.clone(), types.clone(), 0, 0).unwrap();
+        let radius = 0.07f32;
+        let histogram = neighbour_histogram(&t, radius).unwrap();
+        let r2 = f64::from(radius).powi(2);
+        for frame in 0..2 {
+            let p = &position[frame * n * 2..(frame + 1) * n * 2];
+            let d = |i: usize, j: usize| f64::from(p[i]) - f64::from(p[j]);
+            let mut expected = vec![0u64; MAX_NEIGHBOURS + 1];
+            for i in (0..n).filter(|&i| types[i] == LIQUID) {
+                let count = (0..n)
+                    .filter(|&j| {
+                        j != i && d(2 * i, 2 * j).powi(2) + d(2 * i + 1, 2 * j + 1).powi(2) <= r2
+                    })
+                    .count();
+                expected[count.min(MAX_NEIGHBOURS)] += 1;
+            }
+            assert_eq!(histogram[frame], expected, "frame {frame}");
+            assert!(expected[0] < 200, "the test needs neighbours");
+        }
+    }
 }

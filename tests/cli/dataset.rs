@@ -383,42 +383,6 @@ fn render_writes_a_gif_and_stats_a_png() {
 }
 
 #[test]
-fn neighbour_counts_from_the_cell_list_match_brute_force() {
-    use phi::dataset::stats::{MAX_NEIGHBOURS, neighbour_histogram};
-    // Two frames of 300 pseudo-random particles, a third of them obstacles, some outside the
-    // bounds.
-    let mut state = 12345u64;
-    let mut next = || {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (state >> 40) as f32 / (1u64 << 24) as f32
-    };
-    let n = 300;
-    let position: Vec<f32> = (0..2 * n * 2).map(|_| 0.05 + 0.9 * next()).collect();
-    let types: Vec<i64> = (0..n)
-        .map(|i| if i % 3 == 0 { OBSTACLE } else { LIQUID })
-        .collect();
-    let t = Trajectory::new(2, position.clone(), types.clone(), 0, 0).unwrap();
-    let radius = 0.07;
-    let histogram = neighbour_histogram(&t, &[[0.1, 0.9], [0.1, 0.9]], radius);
-    for frame in 0..2 {
-        let p = &position[frame * n * 2..(frame + 1) * n * 2];
-        let mut expected = vec![0u64; MAX_NEIGHBOURS + 1];
-        for i in (0..n).filter(|&i| types[i] == LIQUID) {
-            let count = (0..n)
-                .filter(|&j| {
-                    let (dx, dy) = (p[2 * i] - p[2 * j], p[2 * i + 1] - p[2 * j + 1]);
-                    j != i && dx * dx + dy * dy <= radius * radius
-                })
-                .count();
-            expected[count.min(MAX_NEIGHBOURS)] += 1;
-        }
-        assert_eq!(histogram[frame], expected, "frame {frame}");
-    }
-}
-
-#[test]
 fn export_to_tfrecord_and_npz_and_import_back() {
     let dir = scratch("dataset-export");
     let data = dir.join("data");

@@ -6,7 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::graph::RadiusGraph;
+use crate::graph::neighbour_counts;
 use crate::model::ModelError;
 
 /// The positions of the `liquid` particles of a frame `[N·dim]`: `[L·dim]`.
@@ -40,8 +40,8 @@ pub fn kinetic_energy(previous: &[f32], current: &[f32], liquid: &[bool], dim: u
 }
 
 /// The mean number of other liquid particles within `radius` of a liquid particle: the density
-/// measure of the evaluation (a compressed liquid has more neighbours than the truth). The
-/// radius graph is the GNS's own, whose self-edges are left out here. 0 without liquid
+/// measure of the evaluation (a compressed liquid has more neighbours than the truth), on the
+/// GNS's own radius graph without its self-edges ([`neighbour_counts`]). 0 without liquid
 /// particles.
 ///
 /// # Errors
@@ -57,8 +57,8 @@ pub fn mean_neighbour_count(
     if particles == 0 {
         return Ok(0.0);
     }
-    let graph = RadiusGraph::for_positions(&positions, dim, radius)?;
-    Ok((graph.edges() - particles) as f64 / particles as f64)
+    let counts = neighbour_counts(&positions, dim, radius)?;
+    Ok(counts.iter().sum::<usize>() as f64 / particles as f64)
 }
 
 /// The domain a rollout must stay in and the cells its obstacles fill: what the plausibility

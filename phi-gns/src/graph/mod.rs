@@ -260,6 +260,78 @@ impl RadiusGraph {
     }
 }
 
+/// How many other particles lie within `radius` of each particle (inclusive, as the edges of
+/// [`RadiusGraph`], whose self-edge is left out): `positions` is `[N, dim]`, row-major. The
+/// counts of [`RadiusGraph::for_positions`]'s receivers less one, found without storing the
+/// edges, so memory stays O(N) whatever the radius.
+///
+/// # Errors
+/// As [`RadiusGraph::for_positions`].
+///
+/// # Example
+///
+/// ```
+/// // Three particles on a line 0.5 apart: the middle one has both others within R = 0.5.
+/// let counts = phi_gns::graph::neighbour_counts(&[0.0, 0.0, 0.5, 0.0, 1.0, 0.0], 2, 0.5)?;
+/// assert_eq!(counts, [1, 2, 1]);
+/// # Ok::<(), phi_gns::graph::GraphError>(())
+/// ```
+pub fn neighbour_counts(
+    positions: &[f32],
+    dim: usize,
+    radius: f64,
+) -> Result<Vec<usize>, GraphError> {
+    if !(radius.is_finite() && radius > 0.0) {
+        return Err(GraphError::InvalidRadius { radius });
+    }
+    if dim != 2 && dim != 3 {
+        return Err(GraphError::UnsupportedDimension { dim });
+    }
+    let particles = positions.len() / dim;
+    check_example(0, &ExamplePositions::new(positions, particles), dim)?;
+    Ok(match dim {
+        2 => example_neighbour_counts::<2>(positions, radius),
+        _ => example_neighbour_counts::<3>(positions, radius),
+    })
+}
+
+fn example_neighbour_counts<const D: usize>(positions: &[f32], radius: f64) -> Vec<usize> {
+    let positions: Vec<[f32; D]> = positions
+        .chunks_exact(D)
+        .map(|p| std::array::from_fn(|a| p[a]))
+        .collect();
+    let cells = CellList::new(&positions, radius);
+    let test = within::<D>(radius * radius);
+    let mut counts = vec![0; positions.len()];
+    counts
+        .par_chunks_mut(RECEIVERS_PER_TASK)
+        .enumerate()
+        .for_each(|(task, counts)| {
+            let first = task * RECEIVERS_PER_TASK;
+            let mut found = Vec::new();
+            for (i, count) in counts.iter_mut().enumerate() {
+                found.clear();
+                let r = first + i;
+                cells.neighbours_of(r, &positions[r], &test, &mut found);
+                // The particle itself is always within.
+                *count = found.len() - 1;
+            }
+        });
+    counts
+}
+
+/// The distance test of the edges: `Σ_a (f64(a_a) − f64(b_a))² ≤ R²`.
+fn within<const D: usize>(radius_squared: f64) -> impl Fn(&[f32; D], &[f32; D]) -> bool {
+    move |a, b| {
+        let mut d2 = 0.0;
+        for k in 0..D {
+            let d = f64::from(a[k]) - f64::from(b[k]);
+            d2 += d * d;
+        }
+        d2 <= radius_squared
+    }
+}
+
 /// Checks one example's length and that every component is finite.
 fn check_example(example: usize, e: &ExamplePositions<'_>, dim: usize) -> Result<(), GraphError> {
     if e.particles.checked_mul(dim) != Some(e.positions.len()) {
@@ -293,15 +365,7 @@ fn example_edges<const D: usize>(
         .map(|p| std::array::from_fn(|a| p[a]))
         .collect();
     let cells = CellList::new(&positions, radius);
-    let radius_squared = radius * radius;
-    let within = |a: &[f32; D], b: &[f32; D]| {
-        let mut d2 = 0.0;
-        for k in 0..D {
-            let d = f64::from(a[k]) - f64::from(b[k]);
-            d2 += d * d;
-        }
-        d2 <= radius_squared
-    };
+    let within = within::<D>(radius * radius);
     // Node indices fit in i64: they count elements of slices, which never exceed isize::MAX.
     let node = |i: usize| (offset + i) as i64;
     let n = positions.len();
@@ -315,7 +379,7 @@ fn example_edges<const D: usize>(
             let last = (first + RECEIVERS_PER_TASK).min(n);
             for (r, position) in (first..last).zip(&positions[first..last]) {
                 found.clear();
-                cells.neighbours_of(r, position, within, &mut found);
+                cells.neighbours_of(r, position, &within, &mut found);
                 found.sort_unstable();
                 senders.extend(found.iter().map(|&s| node(s)));
                 receivers.extend(std::iter::repeat_n(node(r), found.len()));
@@ -331,4 +395,84 @@ fn example_edges<const D: usize>(
         receivers.extend(r);
     }
     (senders, receivers)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `n` points of `dim` components in `[-1, 2)` from a fixed linear congruential stream, with
+    /// every fifth point a copy of the one before moved by exactly `radius` along axis 0.
+    fn points(n: usize, dim: usize, radius: f32, seed: u64) -> Vec<f32> {
+        let mut state = seed;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32 * 3.0 - 1.0
+        };
+        let mut p: Vec<f32> = (0..n * dim).map(|_| next()).collect();
+        for i in (5..n).step_by(5) {
+            let (before, this) = p.split_at_mut(i * dim);
+            this[..dim].copy_from_slice(&before[(i - 1) * dim..]);
+            this[0] += radius;
+        }
+        p
+    }
+
+    #[test]
+    fn neighbour_counts_are_the_graphs_receiver_counts_less_the_self_edge() {
+        for (dim, n, radius) in [(2, 700, 0.11), (3, 500, 0.3)] {
+            let p = points(n, dim, radius as f32, 7 + dim as u64);
+            let counts = neighbour_counts(&p, dim, radius).unwrap();
+            let graph = RadiusGraph::for_positions(&p, dim, radius).unwrap();
+            let mut expected = vec![0usize; n];
+            for (&s, &r) in graph.senders().iter().zip(graph.receivers()) {
+                expected[r as usize] += usize::from(s != r);
+            }
+            assert_eq!(counts, expected, "{dim}D");
+            // Brute force, the same f64 test.
+            for i in 0..n {
+                let brute = (0..n)
+                    .filter(|&j| {
+                        let d2: f64 = (0..dim)
+                            .map(|a| f64::from(p[i * dim + a]) - f64::from(p[j * dim + a]))
+                            .map(|d| d * d)
+                            .sum();
+                        j != i && d2 <= radius * radius
+                    })
+                    .count();
+                assert_eq!(counts[i], brute, "{dim}D particle {i}");
+            }
+            assert!(
+                counts.iter().any(|&c| c > 1),
+                "{dim}D: the test needs neighbours"
+            );
+        }
+    }
+
+    #[test]
+    fn neighbour_counts_check_their_input() {
+        assert!(matches!(
+            neighbour_counts(&[0.0, 0.0], 2, 0.0),
+            Err(GraphError::InvalidRadius { .. })
+        ));
+        assert!(matches!(
+            neighbour_counts(&[0.0; 4], 4, 1.0),
+            Err(GraphError::UnsupportedDimension { dim: 4 })
+        ));
+        assert!(matches!(
+            neighbour_counts(&[0.0, 0.0, 1.0], 2, 1.0),
+            Err(GraphError::PositionLength { .. })
+        ));
+        assert!(matches!(
+            neighbour_counts(&[0.0, f32::NAN], 2, 1.0),
+            Err(GraphError::NonFinitePosition {
+                particle: 0,
+                axis: 1,
+                ..
+            })
+        ));
+        assert_eq!(neighbour_counts(&[], 3, 1.0).unwrap(), Vec::<usize>::new());
+    }
 }
