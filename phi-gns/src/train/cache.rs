@@ -21,38 +21,6 @@ pub fn trajectory_bytes(trajectory: &Trajectory) -> usize {
 /// dimension against the metadata, so a damaged or missing file is an error naming the file.
 /// A trajectory larger than the whole capacity is returned but not kept. The bound is on what the
 /// cache holds: an [`Arc`] handed out keeps its trajectory alive until the caller drops it.
-///
-/// ```
-/// use phi_gns::data::{Dataset, LIQUID, Metadata, Trajectory, TrajectoryStats, write_metadata,
-///     write_trajectory};
-/// use phi_gns::train::cache::{TrajectoryCache, trajectory_bytes};
-/// # let dir = std::env::temp_dir().join(format!("phi-gns-doc-cache-{}", std::process::id()));
-/// # let _ = std::fs::remove_dir_all(&dir);
-/// let mut metadata = Metadata::new(2);
-/// metadata.sequence_length = 1;
-/// metadata.splits.insert("train".into(), 2);
-/// // A train split needs its statistics (all zero would normalise nothing).
-/// metadata.vel_std = vec![1e-3; 2];
-/// metadata.acc_std = vec![1e-4; 2];
-/// for index in 0..2 {
-///     let traj = Trajectory::new(2, vec![0.5, 0.5, 0.5, 0.4], vec![LIQUID], 7, index)?;
-///     let path = Dataset::trajectory_path(&dir, "train", index);
-///     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-///     write_trajectory(&path, &traj, &TrajectoryStats::of(&traj))?;
-/// }
-/// write_metadata(&dir, &metadata)?;
-///
-/// let dataset = Dataset::open(&dir)?;
-/// let mut cache = TrajectoryCache::new(&dataset, "train", 0)?;
-/// let one = cache.get(1)?;
-/// // Room for one trajectory: reading the other evicts it.
-/// let mut cache = TrajectoryCache::new(&dataset, "train", trajectory_bytes(&one))?;
-/// cache.get(0)?;
-/// cache.get(1)?;
-/// assert_eq!((cache.len(), cache.held_bytes()), (1, trajectory_bytes(&one)));
-/// # std::fs::remove_dir_all(&dir).unwrap();
-/// # Ok::<(), phi_gns::data::DataError>(())
-/// ```
 #[derive(Debug, Clone)]
 pub struct TrajectoryCache {
     dataset: Dataset,

@@ -20,7 +20,7 @@
 
 pub mod adam;
 pub mod average;
-pub mod cache;
+pub(crate) mod cache;
 pub(crate) mod checkpoint;
 pub mod config;
 mod error;
@@ -28,12 +28,12 @@ pub mod loss;
 pub mod multistep;
 pub mod noise;
 pub mod pushforward;
-pub mod rng;
+pub(crate) mod rng;
 pub mod run;
-pub mod sampler;
+pub(crate) mod sampler;
 pub mod screening;
 pub mod step;
-pub mod stream;
+pub(crate) mod stream;
 
 pub use adam::{Adam, AdamConfig, LearningRate};
 pub use average::WeightAverage;
@@ -44,7 +44,9 @@ pub use loss::{ErrorNorm, acceleration_loss, non_kinematic_mask, one_step_loss};
 pub use multistep::multi_step_loss;
 pub use noise::{RandomWalkNoise, random_walk_noise};
 pub use pushforward::{Pushforward, push_forward, pushforward_loss};
-pub use rng::{RngStream, step_rng};
-pub use sampler::{WindowRef, WindowSampler, WindowSpec};
+pub use sampler::WindowSpec;
 pub use step::{StepInputs, take_step, train_step, train_step_with};
-pub use stream::{BatchConfig, BatchSource, BatchStream, HostBatch, HostExample};
+pub use stream::{BatchConfig, BatchSource, HostExample};
+
+#[cfg(test)]
+mod pipeline_tests;

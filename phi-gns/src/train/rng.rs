@@ -8,13 +8,6 @@
 //! versions or platforms, so it is not used here. [`step_rng`] keys ChaCha8 with the seed and the
 //! purpose and takes the step as the 64-bit stream (nonce): distinct `(seed, purpose, step)`
 //! give distinct keystreams, and no step's draws overlap another's however many are taken.
-//!
-//! ```
-//! use phi_gns::train::rng::{RngStream, step_rng, uniform_index};
-//! let mut a = step_rng(7, 1000, RngStream::Sampling);
-//! let mut b = step_rng(7, 1000, RngStream::Sampling);
-//! assert_eq!(uniform_index(&mut a, 10), uniform_index(&mut b, 10));
-//! ```
 
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::{RngCore, SeedableRng};

@@ -78,18 +78,6 @@ pub struct WindowRef {
 
 /// Draws windows uniformly over all valid `(trajectory, t)` pairs of a split; see the
 /// [module documentation](self).
-///
-/// ```
-/// use phi_gns::train::sampler::{WindowSampler, WindowSpec};
-/// let spec = WindowSpec::one_step(5);
-/// // Two trajectories of 401 frames: 395 windows each, t in 5..=399.
-/// let sampler = WindowSampler::new("train", vec![401, 401], spec)?;
-/// assert_eq!(sampler.windows(), 790);
-/// let batch = sampler.sample(42, 0, 2);
-/// assert_eq!(batch, sampler.sample(42, 0, 2));
-/// assert!(batch.iter().all(|w| (5..=399).contains(&w.frame)));
-/// # Ok::<(), phi_gns::data::DataError>(())
-/// ```
 #[derive(Debug, Clone)]
 pub struct WindowSampler {
     split: String,

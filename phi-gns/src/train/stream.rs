@@ -24,8 +24,6 @@ use crate::data::{DataError, Dataset, IoError};
 /// The default capacity of the trajectory cache: 1 GiB (about 250 trajectories of the thesis'
 /// datasets).
 pub const DEFAULT_CACHE_BYTES: usize = 1 << 30;
-/// The default number of batches the read-ahead thread prepares ahead of the consumer.
-pub const DEFAULT_READ_AHEAD: usize = 3;
 
 /// One window of a batch on the host: the frames `first_frame .. first_frame + F` of trajectory
 /// `trajectory`, latest input frame `frame`.
@@ -208,20 +206,6 @@ impl BatchSource {
 /// Dropping the stream stops its thread: the thread stops before its next file read (or as
 /// soon as the batch it is sending has nowhere to go) and the drop waits for that, so at most
 /// one file read.
-///
-/// ```no_run
-/// use phi_gns::data::Dataset;
-/// use phi_gns::train::sampler::WindowSpec;
-/// use phi_gns::train::stream::{BatchConfig, BatchSource, BatchStream, DEFAULT_READ_AHEAD};
-/// let dataset = Dataset::open("datasets/gns-train")?;
-/// let config = BatchConfig::new(42, 2, WindowSpec::one_step(5));
-/// let source = BatchSource::new(&dataset, "train", &config)?;
-/// // Resume at step 1000 with the batches an uninterrupted run would have seen.
-/// let mut stream = BatchStream::new(source, 1000, DEFAULT_READ_AHEAD)?;
-/// let batch = stream.next()?;
-/// assert_eq!(batch.step, 1000);
-/// # Ok::<(), phi_gns::data::DataError>(())
-/// ```
 #[derive(Debug)]
 pub struct BatchStream {
     next_step: u64,
@@ -264,6 +248,7 @@ impl BatchStream {
     }
 
     /// The step whose batch the next call of [`next`](Self::next) returns.
+    #[cfg(test)]
     pub fn next_step(&self) -> u64 {
         self.next_step
     }

@@ -2,12 +2,12 @@
 
 use std::path::{Path, PathBuf};
 
-use phi_gns::data::{
+use crate::data::{
     Dataset, LIQUID, Metadata, OBSTACLE, Trajectory, TrajectoryStats, write_metadata,
     write_trajectory,
 };
 
-#[path = "../shared/rng.rs"]
+#[path = "../../../tests/shared/rng.rs"]
 mod rng;
 pub use rng::Rng;
 

@@ -1,9 +1,9 @@
 //! Per-step generators: their definition as a ChaCha8 keystream and the unbiased index draw.
 
-use phi_gns::train::rng::{RngStream, step_rng, uniform_index};
+use crate::train::rng::{RngStream, step_rng, uniform_index};
 use rand::RngCore;
 
-use crate::common::{chi_square, chi_square_bound};
+use super::common::{chi_square, chi_square_bound};
 
 /// Block `counter` of the ChaCha keystream with `rounds` rounds (RFC 8439's block function with
 /// a 64-bit counter and a 64-bit nonce, as in the original ChaCha), written out here.

@@ -2,10 +2,10 @@
 
 use std::collections::HashMap;
 
-use phi_gns::data::{DataError, Dataset};
-use phi_gns::train::sampler::{WindowRef, WindowSampler, WindowSpec};
+use crate::data::{DataError, Dataset};
+use crate::train::sampler::{WindowRef, WindowSampler, WindowSpec};
 
-use crate::common::{chi_square, chi_square_bound, temp_dir, write_dataset};
+use super::common::{chi_square, chi_square_bound, temp_dir, write_dataset};
 
 /// Two frames before, two inputs and two after: `F = 1 + 3 + 2 = 6`.
 const SPEC: WindowSpec = WindowSpec {

@@ -1,9 +1,9 @@
 //! The trajectory cache: its contents, its bound, its eviction order and its errors.
 
-use phi_gns::data::{DataError, Dataset};
-use phi_gns::train::cache::{TrajectoryCache, trajectory_bytes};
+use crate::data::{DataError, Dataset};
+use crate::train::cache::{TrajectoryCache, trajectory_bytes};
 
-use crate::common::{Rng, damage, temp_dir, write_dataset};
+use super::common::{Rng, damage, temp_dir, write_dataset};
 
 #[test]
 fn the_cache_never_holds_more_than_its_capacity_and_returns_the_files_trajectories() {

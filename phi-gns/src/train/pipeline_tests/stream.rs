@@ -5,11 +5,11 @@ use std::path::Path;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use phi_gns::data::{Dataset, Trajectory};
-use phi_gns::train::sampler::WindowSpec;
-use phi_gns::train::stream::{BatchConfig, BatchSource, BatchStream, HostBatch};
+use crate::data::{Dataset, Trajectory};
+use crate::train::sampler::WindowSpec;
+use crate::train::stream::{BatchConfig, BatchSource, BatchStream, HostBatch};
 
-use crate::common::{damage, temp_dir, write_dataset};
+use super::common::{damage, temp_dir, write_dataset};
 
 const SPEC: WindowSpec = WindowSpec {
     input_velocities: 2,
@@ -85,7 +85,7 @@ fn a_stream_resumed_at_a_step_yields_what_an_uninterrupted_stream_yields_there()
     let written = write_dataset(&dir, &[3, 5, 4, 6], 10);
     let from_start = batches(&mut stream(&dir, usize::MAX, 0, 3), 40);
     // Another cache state (nothing kept) and both producers.
-    let bytes = phi_gns::train::cache::trajectory_bytes(&written[0]);
+    let bytes = crate::train::cache::trajectory_bytes(&written[0]);
     for read_ahead in [0, 3] {
         let resumed = batches(&mut stream(&dir, bytes, 17, read_ahead), 23);
         assert_eq!(resumed, from_start[17..], "read-ahead {read_ahead}");
