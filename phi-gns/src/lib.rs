@@ -19,3 +19,12 @@ pub mod graph;
 pub mod model;
 pub mod rollout;
 pub mod train;
+
+// The helpers of the data tests (tests/data), shared with the unit tests; they name the crate
+// `phi_gns`.
+#[cfg(test)]
+extern crate self as phi_gns;
+#[cfg(test)]
+#[allow(dead_code)]
+#[path = "../tests/data/common.rs"]
+mod test_data;

@@ -8,7 +8,5 @@ mod dataset;
 mod export;
 #[path = "data/stats.rs"]
 mod stats;
-#[path = "data/tfrecord.rs"]
-mod tfrecord;
 #[path = "data/trajectory.rs"]
 mod trajectory;

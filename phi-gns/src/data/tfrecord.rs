@@ -89,18 +89,18 @@ pub(crate) fn from_deepmind_type(t: i64) -> Option<i64> {
 /// The CRC-32C (Castagnoli, reflected polynomial `0x82F63B78`) of `data`
 /// (`crc32c(b"123456789") == 0xE3069283`), with the CPU's CRC instructions where it has them
 /// (SSE 4.2, ARMv8).
-pub fn crc32c(data: &[u8]) -> u32 {
+pub(crate) fn crc32c(data: &[u8]) -> u32 {
     crc32c::crc32c(data)
 }
 
 /// TFRecord's masked CRC-32C: `((crc >> 15) | (crc << 17)) + 0xa282ead8`.
-pub fn masked_crc32c(data: &[u8]) -> u32 {
+pub(crate) fn masked_crc32c(data: &[u8]) -> u32 {
     let crc = crc32c(data);
     crc.rotate_right(15).wrapping_add(0xa282_ead8)
 }
 
 /// Frames one record: length, masked CRC of the length, data, masked CRC of the data.
-pub fn write_record(w: &mut impl Write, data: &[u8]) -> std::io::Result<()> {
+pub(crate) fn write_record(w: &mut impl Write, data: &[u8]) -> std::io::Result<()> {
     let len = (data.len() as u64).to_le_bytes();
     w.write_all(&len)?;
     w.write_all(&masked_crc32c(&len).to_le_bytes())?;
@@ -109,7 +109,7 @@ pub fn write_record(w: &mut impl Write, data: &[u8]) -> std::io::Result<()> {
 }
 
 /// Reads the records of one TFRecord file in order, checking both CRCs of each.
-pub struct RecordReader {
+pub(crate) struct RecordReader {
     reader: BufReader<File>,
     path: PathBuf,
     /// Bytes left in the file, which bounds a record's claimed length.
@@ -249,7 +249,7 @@ fn map_entry(key: &str, value: &[u8]) -> Vec<u8> {
 
 /// The `tf.train.SequenceExample` of one trajectory (see the module docs); particle types are
 /// mapped to DeepMind's.
-pub fn encode_sequence_example(traj: &Trajectory) -> Vec<u8> {
+pub(crate) fn encode_sequence_example(traj: &Trajectory) -> Vec<u8> {
     let types: Vec<u8> = traj
         .particle_type
         .iter()
@@ -445,7 +445,8 @@ fn decode_feature(bytes: &[u8]) -> Result<Feature, String> {
 /// Decodes one record of the `learning_to_simulate` format into a trajectory of `dim`
 /// dimensions; `index` is used when the record has no `key`. Particle types are mapped from
 /// DeepMind's to ours. `path` and `record` name the record in errors.
-pub fn decode_sequence_example(
+#[cfg(test)]
+pub(crate) fn decode_sequence_example(
     bytes: &[u8],
     dim: usize,
     index: usize,
@@ -750,3 +751,7 @@ pub fn import_tfrecord_with(
     write_metadata(out_dir, &metadata)?;
     Dataset::open(out_dir)
 }
+
+#[cfg(test)]
+#[path = "tfrecord_tests.rs"]
+mod tests;

@@ -7,9 +7,7 @@ use crate::data::{
     write_trajectory,
 };
 
-#[path = "../../../tests/shared/rng.rs"]
-mod rng;
-pub use rng::Rng;
+pub use crate::test_data::Rng;
 
 /// A fresh, empty directory for one test.
 pub fn temp_dir(test: &str) -> PathBuf {

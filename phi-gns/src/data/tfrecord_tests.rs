@@ -1,12 +1,12 @@
-//! DeepMind TFRecords: CRC-32C, record framing, protobuf layout, round trips and damage.
+//! Tests of DeepMind TFRecords: CRC-32C, record framing, protobuf layout, round trips and damage.
 
-use phi_gns::data::tfrecord::{
+use super::{
     RecordReader, crc32c, decode_sequence_example, encode_sequence_example, export_tfrecord,
     import_tfrecord, masked_crc32c, tfrecord_path, write_record,
 };
-use phi_gns::data::{DataError, Dataset, LIQUID, OBSTACLE, Trajectory, read_metadata};
+use crate::data::{DataError, Dataset, LIQUID, OBSTACLE, Trajectory, read_metadata};
 
-use crate::common::{temp_dir, write_sample_dataset};
+use crate::test_data::{temp_dir, write_sample_dataset};
 
 #[test]
 fn crc32c_matches_the_check_value() {
