@@ -19,7 +19,7 @@
 pub use mimalloc::MiMalloc as Allocator;
 
 /// The environment variable that sets mimalloc's purge delay (and so leaves it as it is here).
-pub const PURGE_DELAY_VARIABLE: &str = "MIMALLOC_PURGE_DELAY";
+pub(crate) const PURGE_DELAY_VARIABLE: &str = "MIMALLOC_PURGE_DELAY";
 
 /// `mi_option_purge_delay`, the index of the purge delay among mimalloc's options (v3's
 /// `mi_option_t`; `libmimalloc-sys` does not name it). A test pins it to the environment
@@ -34,7 +34,8 @@ pub fn configure() {
 }
 
 /// mimalloc's purge delay in milliseconds (−1: never purge).
-pub fn purge_delay() -> i64 {
+#[cfg(test)]
+fn purge_delay() -> i64 {
     // SAFETY: reading an option is thread-safe, and the index is in range.
     unsafe { libmimalloc_sys::mi_option_get(PURGE_DELAY_OPTION) as i64 }
 }

@@ -22,7 +22,7 @@ use phi_gns::data::Dataset;
 ///
 /// # Errors
 /// Both given and different, or neither (clap's `required_unless_present` stops that first).
-pub fn dataset_dir(
+pub(crate) fn dataset_dir(
     command: &str,
     data: Option<PathBuf>,
     positional: Option<PathBuf>,
@@ -67,7 +67,7 @@ pub(crate) fn parse_split(name: &str) -> Result<String, String> {
 ///
 /// # Errors
 /// A split the metadata does not list, naming `--split` and the splits it lists.
-pub fn split_len(dataset: &Dataset, dir: &Path, split: &str) -> Result<usize> {
+pub(crate) fn split_len(dataset: &Dataset, dir: &Path, split: &str) -> Result<usize> {
     match dataset.metadata().splits.get(split) {
         Some(&count) => Ok(count),
         None => {

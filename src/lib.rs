@@ -29,4 +29,4 @@ pub use phi_gns;
 /// The code of `README.md`, compiled and run as doc tests, so the README's example stays true.
 #[cfg(all(doctest, feature = "ndarray"))]
 #[doc = include_str!("../README.md")]
-pub struct ReadmeExamples;
+pub(crate) struct ReadmeExamples;

@@ -75,7 +75,7 @@ pub fn memory_limit() -> Result<u64> {
 ///
 /// # Errors
 /// The estimate exceeds [`memory_limit`], or the limit cannot be read.
-pub fn check_memory(what: &str, bytes: u128) -> Result<()> {
+pub(crate) fn check_memory(what: &str, bytes: u128) -> Result<()> {
     let limit = memory_limit()?;
     if bytes > u128::from(limit) {
         bail!(

@@ -79,7 +79,7 @@ pub struct OptimizeArgs {
 }
 
 /// What `phi optimize` writes in its output directory.
-pub const OPTIMIZE_OUTPUTS: Outputs = Outputs {
+pub(crate) const OPTIMIZE_OUTPUTS: Outputs = Outputs {
     command: "phi optimize",
     flag: "--out",
     files: &["loss.csv", "loss.png", "summary.json"],
@@ -519,7 +519,7 @@ pub(crate) fn plot_losses(losses: &[f32]) -> Option<LinePlot> {
 /// accepts a difference below `1e-6` of the largest loss: a loss that reaches single-precision
 /// round-off (an exact match gives values like `1e-11`, then `3e-13`) has converged when it first
 /// gets there, not when it hits its smallest round-off value. 0 for no losses.
-pub fn convergence_iteration(losses: &[f32]) -> usize {
+pub(crate) fn convergence_iteration(losses: &[f32]) -> usize {
     let finite = || losses.iter().copied().filter(|l| l.is_finite());
     let lowest = finite().fold(f32::INFINITY, f32::min);
     let largest = finite().map(f32::abs).fold(0.0, f32::max);

@@ -60,7 +60,7 @@ pub(crate) fn count_bar(len: usize, unit: &str, show: bool) -> ProgressBar {
 
 /// A counter of items (`unit`) whose total is not known in advance, or a hidden one unless
 /// `show`.
-pub fn counter(unit: &str, show: bool) -> ProgressBar {
+pub(crate) fn counter(unit: &str, show: bool) -> ProgressBar {
     if !drawn(show) {
         return ProgressBar::hidden();
     }

@@ -341,7 +341,7 @@ fn merge_paths(out: Option<PathBuf>, mut shards: Vec<PathBuf>) -> Result<(PathBu
 }
 
 /// The file that marks a dataset as written by `phi dataset import`, and where from.
-pub const IMPORT_MARKER: &str = "import.json";
+pub(crate) const IMPORT_MARKER: &str = "import.json";
 
 /// The `made_by` of [`IMPORT_MARKER`].
 pub(crate) const IMPORT_MADE_BY: &str = "phi dataset import";

@@ -24,14 +24,14 @@ use crate::output::target::{Marker, Outputs};
 
 /// The file that marks a folder as an export of phi: who wrote it, from which dataset, in
 /// which format.
-pub const EXPORT_MARKER: &str = "export.json";
+pub(crate) const EXPORT_MARKER: &str = "export.json";
 
 /// The `made_by` of [`EXPORT_MARKER`].
 pub(crate) const EXPORT_MADE_BY: &str = "phi dataset export";
 
 /// What `phi dataset export` writes, in every format: the files of each split, the format's
 /// metadata.json and [`EXPORT_MARKER`].
-pub const EXPORT_OUTPUTS: Outputs = Outputs {
+pub(crate) const EXPORT_OUTPUTS: Outputs = Outputs {
     command: "phi dataset export",
     flag: "--out",
     files: &[EXPORT_MARKER, METADATA_FILE, "*.npz", "*.tfrecord", "*.h5"],

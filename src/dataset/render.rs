@@ -16,7 +16,7 @@ use crate::output::{
 /// `(max − min) / position_scale` cells per axis of the `bounds`; obstacle particles (type 0)
 /// and liquid particles (type 1) get the renderer's two colours.
 #[derive(Debug, Clone)]
-pub struct DatasetRenderer {
+pub(crate) struct DatasetRenderer {
     scale: f32,
     offset: f32,
     resolution: Vec<usize>,
@@ -188,7 +188,7 @@ fn temp_path(out: &Path) -> Result<PathBuf> {
 }
 
 /// What `phi render` writes: a GIF, replaced only with `--force`.
-pub const RENDER_OUTPUT: OutputFile = OutputFile {
+pub(crate) const RENDER_OUTPUT: OutputFile = OutputFile {
     command: "phi render",
     flag: "--out",
     kind: "a GIF",

@@ -42,7 +42,7 @@ pub struct StatsOptions {
 }
 
 /// What `phi dataset stats --out` writes: a PNG, replaced only with `--force`.
-pub const STATS_OUTPUT: OutputFile = OutputFile {
+pub(crate) const STATS_OUTPUT: OutputFile = OutputFile {
     command: "phi dataset stats",
     flag: "--out",
     kind: "a PNG",

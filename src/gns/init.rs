@@ -24,11 +24,11 @@ use phi_gns::model::{
 use crate::output::target::{Marker, Outputs, check_dir};
 
 /// The value of `provenance.made_by` in the `model.json` this command writes.
-pub const MADE_BY: &str = "phi model init";
+pub(crate) const MADE_BY: &str = "phi model init";
 
 /// What `phi model init` writes: a model, recognised by the `provenance.made_by` of its
 /// `model.json`.
-pub const MODEL_OUTPUTS: Outputs = Outputs {
+pub(crate) const MODEL_OUTPUTS: Outputs = Outputs {
     command: "phi model init",
     flag: "--out",
     files: &[MODEL_FILE, WEIGHTS_FILE],

@@ -42,7 +42,7 @@ pub struct ProbeArgs {
 
 /// One model's probe, averaged over the seeds.
 #[derive(Debug, Clone, serde::Serialize)]
-pub struct ProbeRow {
+pub(crate) struct ProbeRow {
     /// The model's name.
     pub label: String,
     /// The model directory, or the floor's pseudo-path.
@@ -56,7 +56,7 @@ pub struct ProbeRow {
 /// # Errors
 /// Unreadable models or dataset; a model that does not fit the dataset; a scene that does not
 /// fit the domain.
-pub fn probe_models(args: &ProbeArgs) -> Result<Vec<ProbeRow>> {
+pub(crate) fn probe_models(args: &ProbeArgs) -> Result<Vec<ProbeRow>> {
     if args.seeds == 0 {
         bail!("--seeds 0: at least one probe scene is needed");
     }

@@ -47,11 +47,11 @@ use crate::output::vtk::{VtkFrame, VtkSeries};
 use crate::output::{ArrayData, FrameStyle, GifWriter, NpyArray, side_by_side, write_npz};
 
 /// The value of [`RolloutRecord::format`].
-pub const ROLLOUT_FORMAT: &str = "phi-rollout";
+pub(crate) const ROLLOUT_FORMAT: &str = "phi-rollout";
 /// The value of [`RolloutRecord::format_version`].
-pub const ROLLOUT_FORMAT_VERSION: u32 = 1;
+pub(crate) const ROLLOUT_FORMAT_VERSION: u32 = 1;
 /// The record of a rollout directory.
-pub const RECORD_FILE: &str = "rollout.json";
+pub(crate) const RECORD_FILE: &str = "rollout.json";
 /// The positions of a rollout directory.
 pub(crate) const POSITIONS_FILE: &str = "rollout.npz";
 /// The animation of a rollout directory.
@@ -64,7 +64,7 @@ pub(crate) const VTK_FILES: [&str; 3] = ["rollout.pvd", "truth.pvd", "vtk"];
 
 /// What `phi rollout` writes in each trajectory's folder, recognised by its [`RECORD_FILE`]
 /// of [`ROLLOUT_FORMAT`].
-pub const ROLLOUT_OUTPUTS: Outputs = Outputs {
+pub(crate) const ROLLOUT_OUTPUTS: Outputs = Outputs {
     command: "phi rollout",
     flag: "--out",
     files: &[
@@ -156,7 +156,7 @@ pub struct RolloutArgs {
 
 /// `rollout.json`: one trajectory's rollout.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RolloutRecord {
+pub(crate) struct RolloutRecord {
     /// Always [`ROLLOUT_FORMAT`]; marks the directory as written by `phi rollout`.
     pub format: String,
     /// Always [`ROLLOUT_FORMAT_VERSION`].
@@ -221,7 +221,7 @@ pub(crate) fn rollout_dir_name(split: &str, index: usize) -> String {
 /// What was checked before any rollout: the dataset, the trajectories, the
 /// range and the output folders.
 #[derive(Debug)]
-pub struct Plan {
+pub(crate) struct Plan {
     dataset: Dataset,
     indices: Vec<usize>,
     range: RolloutRange,
@@ -239,7 +239,7 @@ pub struct Plan {
 ///
 /// # Errors
 /// Naming the file, key or option and what is wrong.
-pub fn plan(args: &RolloutArgs) -> Result<Plan> {
+pub(crate) fn plan(args: &RolloutArgs) -> Result<Plan> {
     let spec = read_spec(&args.model)?;
     let dataset = Dataset::open(&args.data)?;
     let bounds = bounds_for(

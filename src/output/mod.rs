@@ -1,8 +1,7 @@
 //! Writing simulation output: NumPy arrays and pictures.
 //!
-//! - [`npz`]: reading and writing NumPy `.npy` arrays and `.npz` archives ([`write_npz`],
-//!   [`read_npz`]), so that trajectories can be exchanged with Python tooling; it lives in
-//!   [`phi_io::npz`] (so that the library crates can use it) and is re-exported here;
+//! - NumPy `.npy` arrays and `.npz` archives, so that trajectories can be exchanged with Python
+//!   tooling: [`phi_io::npz`], whose reader ([`read_npz`], [`NpyArray`]) is re-exported here;
 //! - [`render`]: drawing particle frames ([`render_frame`]) and saving them as PNG pictures
 //!   ([`write_png`]) or streamed animated GIFs ([`GifWriter`]);
 //! - [`vtk`]: particle frames as VTK `.vtu` files and a `.pvd` series for ParaView
@@ -12,32 +11,25 @@
 //!   own previous output, replaced only with `--force`).
 //!
 //! Every fallible function returns [`OutputError`]; errors about a file name it.
-//! Files that are written in one go ([`write_npz`], [`write_npy`], [`write_png`]) are written
+//! Files that are written in one go (`.npz` archives and PNG pictures) are written
 //! atomically ([`phi_io::write_atomic`]): into a temporary file `.{filename}.tmp-{pid}` in
 //! the same directory, which is flushed to disk and then renamed over the destination, so that
 //! readers never see a half-written file.
 
 pub mod render;
-pub mod sink;
+pub(crate) mod sink;
 pub mod target;
 pub mod vtk;
 
-/// NumPy `.npy` arrays and `.npz` archives: [`phi_io::npz`], re-exported.
-pub mod npz {
-    pub use phi_io::npz::*;
-}
-
 use std::path::{Path, PathBuf};
 
-pub use npz::{
-    ArrayData, NpyArray, NpzReader, NpzWriter, read_npy, read_npy_bytes, read_npz, write_npy,
-    write_npy_bytes, write_npz, write_npz_streamed,
-};
-pub use phi_io::IoError;
+pub(crate) use phi_io::IoError;
+pub(crate) use phi_io::npz::{ArrayData, write_npz};
+pub use phi_io::npz::{NpyArray, read_npz};
 pub(crate) use phi_io::write_atomic;
-pub use render::{
-    DEPTH_LEVELS, FrameStyle, GifWriter, KIND_LIQUID, KIND_OBSTACLE, MAX_PIXELS, RgbImage,
-    render_frame, side_by_side, write_png,
+pub(crate) use render::{
+    FrameStyle, GifWriter, KIND_LIQUID, KIND_OBSTACLE, MAX_PIXELS, RgbImage, render_frame,
+    side_by_side, write_png,
 };
 
 /// Errors of the output module.

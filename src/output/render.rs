@@ -18,12 +18,12 @@ use super::{OutputError, write_atomic};
 
 /// The particle kind of obstacle and boundary particles, drawn dark grey by
 /// [`FrameStyle::default`] (the thesis' convention: obstacles 0, liquid 1).
-pub const KIND_OBSTACLE: u8 = 0;
+pub(crate) const KIND_OBSTACLE: u8 = 0;
 /// The particle kind of liquid particles, drawn blue by [`FrameStyle::default`].
-pub const KIND_LIQUID: u8 = 1;
+pub(crate) const KIND_LIQUID: u8 = 1;
 
 /// The largest picture [`render_frame`] draws, in pixels (2^28, i.e. 768 MiB of RGB).
-pub const MAX_PIXELS: u64 = 1 << 28;
+pub(crate) const MAX_PIXELS: u64 = 1 << 28;
 
 /// An 8-bit RGB picture.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -48,7 +48,8 @@ impl RgbImage {
     }
 
     /// The colour of the pixel in column `x` and row `y` (row 0 at the top), `None` outside.
-    pub fn pixel(&self, x: u32, y: u32) -> Option<[u8; 3]> {
+    #[cfg(test)]
+    pub(crate) fn pixel(&self, x: u32, y: u32) -> Option<[u8; 3]> {
         let i = self.index(x, y)?;
         let p = self.pixels.get(i..i + 3)?;
         Some([p[0], p[1], p[2]])
@@ -99,7 +100,7 @@ impl RgbImage {
 ///
 /// Fails with [`OutputError::InvalidInput`] when there is no picture, the heights differ or a
 /// picture's pixels do not fill its size.
-pub fn side_by_side(
+pub(crate) fn side_by_side(
     images: &[&RgbImage],
     gap: u32,
     gap_color: [u8; 3],
@@ -149,7 +150,7 @@ pub fn side_by_side(
 
 /// How [`render_frame`] draws a frame.
 #[derive(Debug, Clone, PartialEq)]
-pub struct FrameStyle {
+pub(crate) struct FrameStyle {
     /// The size of one grid cell in pixels (cells are drawn square).
     pub pixels_per_cell: u32,
     /// The radius of the particle discs, in cells.
@@ -172,7 +173,7 @@ pub struct FrameStyle {
 }
 
 /// The number of shades used for depth shading in 3D (see [`FrameStyle::depth_shading`]).
-pub const DEPTH_LEVELS: u32 = 4;
+pub(crate) const DEPTH_LEVELS: u32 = 4;
 
 impl Default for FrameStyle {
     /// 8 pixels per cell, discs of 0.35 cells, white background, light grey obstacle cells, a
@@ -213,7 +214,7 @@ impl FrameStyle {
 
     /// Every colour [`render_frame`] can draw with this style (depth shades included), followed
     /// by a few greys, without duplicates and at most 256: a palette for [`GifWriter`].
-    pub fn palette(&self) -> Vec<[u8; 3]> {
+    pub(crate) fn palette(&self) -> Vec<[u8; 3]> {
         let mut colors = vec![self.background, self.obstacle_cell_color, self.frame_color];
         let kinds = self
             .kind_colors
@@ -275,7 +276,7 @@ fn shade(color: [u8; 3], background: [u8; 3], level: u32) -> [u8; 3] {
 /// Fails with [`OutputError::InvalidInput`] when the lengths disagree, `dim` is not 2 or 3, the
 /// domain is empty or not finite, or the picture would exceed 2^28 pixels.
 #[allow(clippy::too_many_arguments)]
-pub fn render_frame(
+pub(crate) fn render_frame(
     positions: &[f32],
     dim: usize,
     kinds: &[u8],
@@ -514,7 +515,7 @@ pub fn write_png(path: impl AsRef<Path>, image: &RgbImage) -> Result<(), OutputE
 /// Unlike [`write_png`], the file is therefore written in place, not atomically.
 ///
 /// Dropping a `GifWriter` without calling `finish` leaves the file as a killed process would.
-pub struct GifWriter {
+pub(crate) struct GifWriter {
     path: PathBuf,
     file: File,
     /// Encodes into memory; its bytes are moved to `file` after each step. `None` once finished.
@@ -545,7 +546,7 @@ impl GifWriter {
     /// Creates (or truncates) the GIF file `path` for frames of `width` x `height` pixels shown
     /// `frame_delay_cs` hundredths of a second each, with the palette of
     /// [`FrameStyle::default`].
-    pub fn create(
+    pub(crate) fn create(
         path: impl AsRef<Path>,
         width: u32,
         height: u32,
@@ -619,11 +620,6 @@ impl GifWriter {
         };
         writer.flush_encoded()?;
         Ok(writer)
-    }
-
-    /// The destination file.
-    pub fn path(&self) -> &Path {
-        &self.path
     }
 
     /// Moves what the encoder produced so far to the file and flushes it.

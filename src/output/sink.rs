@@ -11,7 +11,7 @@ use phi_flip::RecordedFrame;
 
 /// One frame of a run, with the frame before it and, for a rollout, the ground truth.
 #[derive(Debug, Clone, Copy)]
-pub struct FrameView<'a> {
+pub(crate) struct FrameView<'a> {
     /// The frame's index (a dataset frame for a rollout).
     pub frame: usize,
     /// The step that made it, counted from 1 (0 for the start frame).
@@ -25,7 +25,7 @@ pub struct FrameView<'a> {
 }
 
 /// Where a run's frames go.
-pub trait FrameSink {
+pub(crate) trait FrameSink {
     /// Takes one frame.
     ///
     /// # Errors

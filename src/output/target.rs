@@ -24,21 +24,16 @@ pub use phi_io::output_dir::{
 /// [`OutputDir`] with `anyhow` errors.
 #[derive(Debug)]
 #[must_use = "a previous output is replaced only once removed"]
-pub struct Previous(OutputDir);
+pub(crate) struct Previous(OutputDir);
 
 impl Previous {
-    /// Whether the target held nothing of a previous output.
-    pub fn is_empty(&self) -> bool {
-        self.0.holds_nothing()
-    }
-
     /// The previous output, refused unless `force` or there is none
     /// ([`OutputDir::require_force`]).
     ///
     /// # Errors
     /// A previous output and no `force`: the message names the folder, what it holds and
     /// `--force`.
-    pub fn require_force(self, force: bool) -> Result<Self> {
+    pub(crate) fn require_force(self, force: bool) -> Result<Self> {
         Ok(Self(self.0.require_force(force)?))
     }
 
@@ -55,18 +50,13 @@ impl Previous {
         self.0.clear_previous()?;
         Ok(())
     }
-
-    /// The claimed folder.
-    pub fn into_inner(self) -> OutputDir {
-        self.0
-    }
 }
 
 /// Refuses a `path` that exists and is not a directory, naming `flag`.
 ///
 /// # Errors
 /// As above.
-pub fn check_not_a_file(path: &Path, flag: &'static str) -> Result<()> {
+pub(crate) fn check_not_a_file(path: &Path, flag: &'static str) -> Result<()> {
     Ok(OutputDir::check_not_a_file(path, flag)?)
 }
 

@@ -27,7 +27,7 @@ const VTK_VERTEX: u8 = 1;
 
 /// One frame of particles.
 #[derive(Debug, Clone, Copy)]
-pub struct VtkFrame<'a> {
+pub(crate) struct VtkFrame<'a> {
     /// The frame's time in seconds.
     pub time: f64,
     /// The spatial dimension, 1 to 3.
@@ -42,7 +42,7 @@ pub struct VtkFrame<'a> {
 
 /// Writes a series of frames: `dir/{subdir}/frame_NNNNN.vtu` and `dir/{name}.pvd`.
 #[derive(Debug)]
-pub struct VtkSeries {
+pub(crate) struct VtkSeries {
     dir: PathBuf,
     subdir: String,
     prefix: String,
@@ -56,7 +56,7 @@ impl VtkSeries {
     ///
     /// # Errors
     /// The frame folder cannot be created.
-    pub fn create(dir: &Path, name: &str, subdir: &str) -> Result<Self, OutputError> {
+    pub(crate) fn create(dir: &Path, name: &str, subdir: &str) -> Result<Self, OutputError> {
         let frames = dir.join(subdir);
         std::fs::create_dir_all(&frames)
             .map_err(|e| OutputError::io(&frames, "cannot create the directory", e))?;
@@ -71,7 +71,7 @@ impl VtkSeries {
 
     /// Names the frames `{prefix}_NNNNN.vtu` instead of `frame_NNNNN.vtu` (for two series
     /// sharing a folder).
-    pub fn with_prefix(mut self, prefix: &str) -> Self {
+    pub(crate) fn with_prefix(mut self, prefix: &str) -> Self {
         self.prefix = prefix.to_string();
         self
     }
@@ -83,13 +83,9 @@ impl VtkSeries {
     }
 
     /// The frames written so far.
-    pub fn len(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn len(&self) -> usize {
         self.entries.len()
-    }
-
-    /// Whether no frame has been written.
-    pub fn is_empty(&self) -> bool {
-        self.entries.is_empty()
     }
 
     /// Writes frame `index` as `frame_{index:05}.vtu` (or with the prefix of

@@ -54,17 +54,17 @@ use crate::output::target::{Marker, OutputSubdir, Outputs, Previous, previous_ou
 use crate::output::{FrameStyle, GifWriter, OutputError, RgbImage, side_by_side, write_atomic};
 
 /// The value of [`EvalRecord::format`].
-pub const EVAL_FORMAT: &str = "phi-eval";
+pub(crate) const EVAL_FORMAT: &str = "phi-eval";
 /// The value of [`CacheEntry::format`].
-pub const CACHE_FORMAT: &str = "phi-eval-trajectory";
+pub(crate) const CACHE_FORMAT: &str = "phi-eval-trajectory";
 /// The record of an evaluation directory.
-pub const RECORD_FILE: &str = "eval.json";
+pub(crate) const RECORD_FILE: &str = "eval.json";
 /// The table in the units of table B.1.
 pub(crate) const TABLE_MD: &str = "table.md";
 /// The table in raw values.
 pub(crate) const TABLE_CSV: &str = "table.csv";
 /// The per-trajectory results.
-pub const CACHE_DIR: &str = "cache";
+pub(crate) const CACHE_DIR: &str = "cache";
 /// Fig. 5.7: MSE and EMD per frame.
 pub(crate) const ERROR_PLOT: &str = "error_over_time.png";
 /// Fig. 5.6: the metrics of table B.1 as bars.
@@ -76,7 +76,7 @@ pub(crate) const GIF_FILE: &str = "rollouts.gif";
 
 /// What `phi eval` writes, recognised by the `format` of its [`RECORD_FILE`]. The entries of
 /// [`CACHE_DIR`] are checked one by one when read ([`EVAL_FORMAT`]'s cache entries).
-pub const EVAL_OUTPUTS: Outputs = Outputs {
+pub(crate) const EVAL_OUTPUTS: Outputs = Outputs {
     command: "phi eval",
     flag: "--out",
     files: &[
@@ -188,7 +188,7 @@ pub struct EvalArgs {
 
 /// A model as the command line named it, resolved.
 #[derive(Debug, Clone)]
-pub struct ModelEntry {
+pub(crate) struct ModelEntry {
     /// Its name in tables and plots.
     pub label: String,
     /// The model directory (model.json, model.safetensors).
@@ -239,7 +239,7 @@ impl ModelEntry {
 
 /// One model's part of `eval.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ModelRecord {
+pub(crate) struct ModelRecord {
     /// The model's name.
     pub label: String,
     /// The model directory.
@@ -259,7 +259,7 @@ pub struct ModelRecord {
 
 /// `eval.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct EvalRecord {
+pub(crate) struct EvalRecord {
     /// Always [`EVAL_FORMAT`].
     pub format: String,
     /// `phi eval` and its version.
@@ -282,7 +282,7 @@ pub struct EvalRecord {
 
 /// What `rollouts.gif` shows.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct GifRecord {
+pub(crate) struct GifRecord {
     /// The trajectory's index in the split.
     pub index: usize,
     /// The panels from left to right: `ground truth`, then the models' names.
@@ -293,7 +293,7 @@ pub struct GifRecord {
 
 /// `cache/<model>/<split>_<index>.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct CacheEntry {
+pub(crate) struct CacheEntry {
     /// Always [`CACHE_FORMAT`].
     pub format: String,
     /// The model directory it was computed for.
@@ -310,7 +310,7 @@ pub struct CacheEntry {
 
 /// What was checked before any evaluation.
 #[derive(Debug)]
-pub struct Plan {
+pub(crate) struct Plan {
     /// `--data`, then each `--model-data` dataset.
     datasets: Vec<Dataset>,
     models: Vec<ModelEntry>,
@@ -432,7 +432,7 @@ fn model_digest(dir: &Path) -> Result<String> {
 ///
 /// # Errors
 /// Naming the option, file or key and what is wrong.
-pub fn plan(args: &EvalArgs) -> Result<Plan> {
+pub(crate) fn plan(args: &EvalArgs) -> Result<Plan> {
     let dataset = Dataset::open(&args.data)?;
     let (mut datasets, model_data) = (vec![dataset], other_datasets(args)?);
     let models = resolve_models(args, &mut datasets, &model_data)?;

@@ -57,7 +57,7 @@ type Metric = (&'static str, f64, fn(&ModelSummary) -> Option<f64>);
 
 /// One bar chart per metric of table B.1, one bar per model (fig. 5.6); a model whose
 /// rollouts blew up has no bar for the rollout metrics.
-pub fn metric_bars(record: &EvalRecord, path: &Path) -> Result<()> {
+pub(crate) fn metric_bars(record: &EvalRecord, path: &Path) -> Result<()> {
     let metrics: [Metric; 4] = [
         ("EMD (10⁻²)", 1e-2, |s| s.emd),
         ("MSE-acc 1 (10⁻¹)", 1e-1, |s| Some(s.mse_acc1)),
@@ -168,7 +168,11 @@ const CAPTION_SIZE: f64 = 14.0;
 
 /// `picture` with a strip above it that holds `caption`, centred (clipped at the sides when the
 /// picture is narrower than the text), in dark grey on `background`.
-pub fn captioned(picture: &RgbImage, caption: &str, background: [u8; 3]) -> Result<RgbImage> {
+pub(crate) fn captioned(
+    picture: &RgbImage,
+    caption: &str,
+    background: [u8; 3],
+) -> Result<RgbImage> {
     let (text_width, text_height) = phi_plot::text_size(caption, CAPTION_SIZE)?;
     let strip = text_height + 6;
     let mut image = RgbImage::new(picture.width, picture.height + strip, background);
