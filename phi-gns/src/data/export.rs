@@ -36,7 +36,7 @@ pub const LB_SOLID_WALL: i64 = 1;
 /// The keys of gns's `metadata.json` (the nine its `train.py` reads), with the values of the
 /// dataset's own metadata.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct GnsMetadata {
+pub(crate) struct GnsMetadata {
     /// `[min, max]` per axis.
     pub bounds: Vec<[f64; 2]>,
     /// Steps per trajectory (frames − 1).

@@ -162,7 +162,7 @@ impl RecordReader {
     }
 
     /// The data of the next record, `None` at the end of the file.
-    pub fn next_record(&mut self) -> Result<Option<Vec<u8>>, DataError> {
+    pub(crate) fn next_record(&mut self) -> Result<Option<Vec<u8>>, DataError> {
         if self.remaining == 0 {
             return Ok(None);
         }

@@ -22,11 +22,11 @@ use crate::data::{LIQUID, Metadata};
 use crate::model::{Gns, GnsKernels, GraphBatch};
 
 /// Rows of cells of the pool at rest.
-pub const POOL_CELLS: usize = 4;
+pub(crate) const POOL_CELLS: usize = 4;
 /// The side of the falling block, in cells.
-pub const BLOCK_CELLS: usize = 6;
+pub(crate) const BLOCK_CELLS: usize = 6;
 /// The least gap between the pool's surface and the block's lowest point, in cells.
-pub const GAP_CELLS: usize = 12;
+pub(crate) const GAP_CELLS: usize = 12;
 
 /// The probe scene: a window the model predicts from and which particles are which.
 #[derive(Debug, Clone, PartialEq)]

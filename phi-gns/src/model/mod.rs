@@ -275,11 +275,6 @@ impl<B: GnsKernels> Gns<B> {
         model
     }
 
-    /// The normalisation constants and bounds as `[dim]` tensors.
-    pub fn normalisers(&self) -> &Normalisers<B> {
-        &self.normalisers
-    }
-
     /// The network's output: the normalised acceleration `[N, dim]` of every particle.
     ///
     /// # Errors

@@ -130,7 +130,7 @@ impl<B: Backend> Parameters<B> {
     /// # Errors
     /// [`ModelError::MissingWeight`], [`ModelError::UnexpectedWeight`] or
     /// [`ModelError::WeightShape`] naming the tensor and both shapes.
-    pub fn from_tensors(
+    pub(crate) fn from_tensors(
         config: &GnsConfig,
         mut tensors: BTreeMap<String, Tensor<B>>,
         source: &std::path::Path,

@@ -8,7 +8,7 @@ use crate::data::{DataError, Dataset, Trajectory};
 
 /// The bytes a decoded trajectory occupies: its positions (f32), particle types (i64) and the
 /// struct itself. This is what [`TrajectoryCache`] counts against its capacity.
-pub fn trajectory_bytes(trajectory: &Trajectory) -> usize {
+pub(crate) fn trajectory_bytes(trajectory: &Trajectory) -> usize {
     std::mem::size_of::<Trajectory>()
         + trajectory.position.len() * std::mem::size_of::<f32>()
         + trajectory.particle_type.len() * std::mem::size_of::<i64>()
@@ -112,13 +112,9 @@ impl TrajectoryCache {
         &self.split
     }
 
-    /// The most bytes the cache holds.
-    pub fn capacity_bytes(&self) -> usize {
-        self.capacity_bytes
-    }
-
-    /// The bytes of the trajectories held now (at most [`capacity_bytes`](Self::capacity_bytes)).
-    pub fn held_bytes(&self) -> usize {
+    /// The bytes of the trajectories held now (at most the capacity).
+    #[cfg(test)]
+    pub(crate) fn held_bytes(&self) -> usize {
         self.held_bytes
     }
 

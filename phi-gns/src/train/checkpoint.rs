@@ -36,7 +36,7 @@ pub(crate) const BEST_FILE: &str = "best.json";
 /// The weight average of a checkpoint, a model directory.
 pub(crate) const AVERAGE_DIR: &str = "average";
 /// The value of [`CheckpointState::format`].
-pub const CHECKPOINT_FORMAT: &str = "phi-gns-checkpoint";
+pub(crate) const CHECKPOINT_FORMAT: &str = "phi-gns-checkpoint";
 
 /// The loss of the steps since the last row of `train.csv`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
@@ -80,7 +80,7 @@ pub struct Best {
 /// `state.json` of a checkpoint.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct CheckpointState {
+pub(crate) struct CheckpointState {
     /// Always [`CHECKPOINT_FORMAT`].
     pub format: String,
     /// Optimisation steps done.
@@ -272,7 +272,7 @@ pub fn checkpoints(out: &Path) -> Result<Vec<(u64, PathBuf)>, TrainError> {
 ///
 /// # Errors
 /// [`TrainError::Checkpoint`] when a directory cannot be removed.
-pub fn prune_checkpoints(out: &Path, keep: usize) -> Result<(), TrainError> {
+pub(crate) fn prune_checkpoints(out: &Path, keep: usize) -> Result<(), TrainError> {
     let all = checkpoints(out)?;
     for (_, dir) in all.iter().take(all.len().saturating_sub(keep)) {
         std::fs::remove_dir_all(dir).map_err(|e| error(dir, format!("cannot remove: {e}")))?;

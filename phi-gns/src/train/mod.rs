@@ -3,8 +3,9 @@
 //! - [`noise`]: DeepMind's random-walk noise on the input positions, and the matching target;
 //! - [`adam`]: Adam over the named parameters, with DeepMind's learning-rate schedule;
 //! - [`loss`]: the one-step loss of equation 5.1 on normalised accelerations;
-//! - the data pipeline: [`rng`] (per-step generators), [`sampler`] (windows), [`cache`]
-//!   (trajectories) and [`stream`] (batches read ahead on another thread).
+//! - the data pipeline: `rng` (per-step generators), `sampler` (windows), `cache`
+//!   (trajectories) and `stream` (batches read ahead on another thread), crate-private but
+//!   for [`BatchSource`] (the batches of any step) and [`WindowSpec`].
 //! - [`multistep`]: the multi-step loss of equation 5.2, the model run on its own predictions;
 //! - [`pushforward`]: LagrangeBench's pushforward training, a one-step loss after unrolled
 //!   steps without gradient, and its schedule.
@@ -12,7 +13,7 @@
 //! - [`average`]: a moving average of the weights over the steps, screened and kept instead
 //!   of the weights of one step.
 //!
-//! [`step`] is one training step read top to bottom ([`take_step`]: windows, mirroring, noise,
+//! [`step`] is one training step read top to bottom (`take_step`: windows, mirroring, noise,
 //! targets, graph, the variant's loss, gradients, Adam); [`train_step`] and
 //! [`train_step_with`] take one Adam step on a loss of the caller's. A whole run, with its
 //! presets ([`config`]), checkpoints (`checkpoint`), screening on the validation split
@@ -45,7 +46,7 @@ pub use multistep::multi_step_loss;
 pub use noise::{RandomWalkNoise, random_walk_noise};
 pub use pushforward::{Pushforward, push_forward, pushforward_loss};
 pub use sampler::WindowSpec;
-pub use step::{StepInputs, take_step, train_step, train_step_with};
+pub use step::{train_step, train_step_with};
 pub use stream::{BatchConfig, BatchSource, HostExample};
 
 #[cfg(test)]

@@ -18,7 +18,7 @@ use rand_chacha::rand_core::{RngCore, SeedableRng};
 /// The identifiers ([`RngStream::id`]) are part of the reproducibility contract: new purposes
 /// get new identifiers, existing ones never change.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum RngStream {
+pub(crate) enum RngStream {
     /// The windows of the batch ([`crate::train::sampler::WindowSampler::sample`]).
     Sampling,
     /// The random-walk noise on the input positions ([`crate::train::random_walk_noise`]).
@@ -46,7 +46,7 @@ impl RngStream {
 ///
 /// The result depends on nothing but the three arguments; it is a [`rand::Rng`], so
 /// distributions such as `rand_distr::Normal` draw from it.
-pub fn step_rng(seed: u64, step: u64, stream: RngStream) -> ChaCha8Rng {
+pub(crate) fn step_rng(seed: u64, step: u64, stream: RngStream) -> ChaCha8Rng {
     let mut key = [0u8; 32];
     key[..8].copy_from_slice(&seed.to_le_bytes());
     key[8..16].copy_from_slice(&stream.id().to_le_bytes());
@@ -64,7 +64,7 @@ pub fn step_rng(seed: u64, step: u64, stream: RngStream) -> ChaCha8Rng {
 ///
 /// # Panics
 /// If `n` is 0 (there is no integer to draw; callers check first).
-pub fn uniform_index(rng: &mut impl RngCore, n: usize) -> usize {
+pub(crate) fn uniform_index(rng: &mut impl RngCore, n: usize) -> usize {
     assert!(n > 0, "uniform_index: empty range");
     let n = n as u64;
     let mut product = u128::from(rng.next_u64()) * u128::from(n);

@@ -53,7 +53,7 @@ pub(crate) const TRAIN_FILE: &str = "train.json";
 /// The configuration as run.
 pub const CONFIG_FILE: &str = "config.toml";
 /// The loss and screening log.
-pub const LOG_FILE: &str = "train.csv";
+pub(crate) const LOG_FILE: &str = "train.csv";
 /// The header of [`LOG_FILE`].
 pub(crate) const LOG_HEADER: &str =
     "step,loss,learning_rate,steps_per_second,valid_mse_acc1,valid_rollout_mse";
@@ -456,7 +456,7 @@ fn checkpoint_error(path: &Path, reason: impl std::fmt::Display) -> TrainError {
 }
 
 /// The lock file of a training directory: the process id of the run that holds it.
-pub const LOCK_FILE: &str = "train.lock";
+pub(crate) const LOCK_FILE: &str = "train.lock";
 
 /// A training directory held by this process ([`LOCK_FILE`]), freed when dropped. A lock left by
 /// a process that no longer runs (a run that was killed) is taken over.

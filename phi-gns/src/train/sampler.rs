@@ -144,7 +144,11 @@ impl WindowSampler {
     ///
     /// # Errors
     /// [`DataError::UnknownSplit`]; as [`WindowSampler::new`].
-    pub fn for_split(dataset: &Dataset, split: &str, spec: WindowSpec) -> Result<Self, DataError> {
+    pub(crate) fn for_split(
+        dataset: &Dataset,
+        split: &str,
+        spec: WindowSpec,
+    ) -> Result<Self, DataError> {
         let count = dataset.split_len(split)?;
         Self::new(split, vec![dataset.metadata().frames(); count], spec)
     }

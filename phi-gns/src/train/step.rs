@@ -29,7 +29,7 @@ use crate::model::{Gns, GnsKernels, GraphBatch, ModelError};
 /// # Errors
 /// As [`StepInputs::assemble`] and [`train_step_with`] ([`ModelError::NonFinite`] leaves
 /// `model` and `adam` as they were).
-pub fn take_step<B: AutodiffBackend + GnsKernels>(
+pub(crate) fn take_step<B: AutodiffBackend + GnsKernels>(
     model: &Gns<B>,
     adam: &mut Adam<B>,
     config: &TrainConfig,
@@ -50,7 +50,7 @@ pub fn take_step<B: AutodiffBackend + GnsKernels>(
 /// The inputs of one step's loss, on the device: the (noisy, mirrored) windows and their
 /// graph, the targets, the true frames of a multi-step or pushforward loss, the mask of the
 /// particles that count.
-pub struct StepInputs<B: GnsKernels> {
+pub(crate) struct StepInputs<B: GnsKernels> {
     batch: GraphBatch<B>,
     next: Tensor<B>,
     /// `[N, m, dim]`: the true frames the multi-step or pushforward loss reads (none for the
@@ -77,7 +77,7 @@ impl<B: GnsKernels> StepInputs<B> {
     ///
     /// # Errors
     /// Graph errors for non-finite positions; shape errors.
-    pub fn assemble(
+    pub(crate) fn assemble(
         model: &Gns<B>,
         config: &TrainConfig,
         batch: &HostBatch,

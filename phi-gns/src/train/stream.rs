@@ -23,7 +23,7 @@ use crate::data::{DataError, Dataset, IoError};
 
 /// The default capacity of the trajectory cache: 1 GiB (about 250 trajectories of the thesis'
 /// datasets).
-pub const DEFAULT_CACHE_BYTES: usize = 1 << 30;
+pub(crate) const DEFAULT_CACHE_BYTES: usize = 1 << 30;
 
 /// One window of a batch on the host: the frames `first_frame .. first_frame + F` of trajectory
 /// `trajectory`, latest input frame `frame`.
@@ -207,7 +207,7 @@ impl BatchSource {
 /// soon as the batch it is sending has nowhere to go) and the drop waits for that, so at most
 /// one file read.
 #[derive(Debug)]
-pub struct BatchStream {
+pub(crate) struct BatchStream {
     next_step: u64,
     producer: Producer,
 }
