@@ -542,7 +542,7 @@ fn every_lever_and_gpu_preset_parses_and_holds_what_its_name_says() {
             if name.contains("average") {
                 assert!(c.training.ema_decay.is_some(), "{at}");
             }
-            if name.contains("two-step") {
+            if name.contains("two-step") || name.starts_with("2s") {
                 assert_eq!(c.training.extra_steps, 1, "{at}");
             }
             if name.contains("noise") {
