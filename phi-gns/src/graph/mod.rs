@@ -296,11 +296,7 @@ pub fn neighbour_counts(
 }
 
 fn example_neighbour_counts<const D: usize>(positions: &[f32], radius: f64) -> Vec<usize> {
-    let positions: Vec<[f32; D]> = positions
-        .chunks_exact(D)
-        .map(|p| std::array::from_fn(|a| p[a]))
-        .collect();
-    let cells = CellList::new(&positions, radius);
+    let (positions, cells) = points_and_cells::<D>(positions, radius);
     let test = within::<D>(radius * radius);
     let mut counts = vec![0; positions.len()];
     counts
@@ -318,6 +314,19 @@ fn example_neighbour_counts<const D: usize>(positions: &[f32], radius: f64) -> V
             }
         });
     counts
+}
+
+/// The positions (`[N, D]`, row-major) as points, and their cell list for `radius`.
+fn points_and_cells<const D: usize>(
+    positions: &[f32],
+    radius: f64,
+) -> (Vec<[f32; D]>, CellList<D>) {
+    let points: Vec<[f32; D]> = positions
+        .chunks_exact(D)
+        .map(|p| std::array::from_fn(|a| p[a]))
+        .collect();
+    let cells = CellList::new(&points, radius);
+    (points, cells)
 }
 
 /// The distance test of the edges: `Σ_a (f64(a_a) − f64(b_a))² ≤ R²`.
@@ -360,11 +369,7 @@ fn example_edges<const D: usize>(
     radius: f64,
     offset: usize,
 ) -> (Vec<i64>, Vec<i64>) {
-    let positions: Vec<[f32; D]> = positions
-        .chunks_exact(D)
-        .map(|p| std::array::from_fn(|a| p[a]))
-        .collect();
-    let cells = CellList::new(&positions, radius);
+    let (positions, cells) = points_and_cells::<D>(positions, radius);
     let within = within::<D>(radius * radius);
     // Node indices fit in i64: they count elements of slices, which never exceed isize::MAX.
     let node = |i: usize| (offset + i) as i64;
