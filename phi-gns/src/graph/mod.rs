@@ -162,15 +162,7 @@ impl RadiusGraph {
         dim: usize,
         radius: f64,
     ) -> Result<Self, GraphError> {
-        if !(radius.is_finite() && radius > 0.0) {
-            return Err(GraphError::InvalidRadius { radius });
-        }
-        if dim != 2 && dim != 3 {
-            return Err(GraphError::UnsupportedDimension { dim });
-        }
-        for (example, e) in examples.iter().enumerate() {
-            check_example(example, e, dim)?;
-        }
+        check_batch(examples, dim, radius)?;
         let mut node_offsets = Vec::with_capacity(examples.len() + 1);
         node_offsets.push(0);
         for e in examples {
@@ -281,14 +273,8 @@ pub fn neighbour_counts(
     dim: usize,
     radius: f64,
 ) -> Result<Vec<usize>, GraphError> {
-    if !(radius.is_finite() && radius > 0.0) {
-        return Err(GraphError::InvalidRadius { radius });
-    }
-    if dim != 2 && dim != 3 {
-        return Err(GraphError::UnsupportedDimension { dim });
-    }
-    let particles = positions.len() / dim;
-    check_example(0, &ExamplePositions::new(positions, particles), dim)?;
+    let particles = positions.len().checked_div(dim).unwrap_or(0);
+    check_batch(&[ExamplePositions::new(positions, particles)], dim, radius)?;
     Ok(match dim {
         2 => example_neighbour_counts::<2>(positions, radius),
         _ => example_neighbour_counts::<3>(positions, radius),
@@ -339,6 +325,24 @@ fn within<const D: usize>(radius_squared: f64) -> impl Fn(&[f32; D], &[f32; D]) 
         }
         d2 <= radius_squared
     }
+}
+
+/// Checks the radius (finite, > 0), the dimension (2 or 3) and every example.
+fn check_batch(
+    examples: &[ExamplePositions<'_>],
+    dim: usize,
+    radius: f64,
+) -> Result<(), GraphError> {
+    if !(radius.is_finite() && radius > 0.0) {
+        return Err(GraphError::InvalidRadius { radius });
+    }
+    if dim != 2 && dim != 3 {
+        return Err(GraphError::UnsupportedDimension { dim });
+    }
+    for (example, e) in examples.iter().enumerate() {
+        check_example(example, e, dim)?;
+    }
+    Ok(())
 }
 
 /// Checks one example's length and that every component is finite.
