@@ -15,6 +15,7 @@ use anyhow::{Context, Result, bail};
 use phi_core::AutodiffBackend;
 use phi_gns::model::GnsKernels;
 use phi_gns::train::TrainConfig;
+use phi_gns::train::config::SelectBy;
 use phi_gns::train::run::{CONFIG_FILE, RunOptions, TrainRecord, TrainingRun};
 
 use crate::backends::BackendKind;
@@ -69,6 +70,15 @@ pub struct TrainArgs {
     /// screening.every).
     #[arg(long)]
     pub screen_every: Option<u64>,
+    /// The EMD of every this many predicted frames of the screening rollouts, 0 for none
+    /// (overrides screening.emd_every; may change on --resume).
+    #[arg(long)]
+    pub emd_every: Option<usize>,
+    /// The screening metric that picks best/: mse_acc1, rollout_mse or emd (overrides
+    /// screening.select_by; may change on --resume, and the next screening then starts the
+    /// best afresh).
+    #[arg(long)]
+    pub select_by: Option<SelectBy>,
     /// Keep a moving average of the weights with this decay, e.g. 0.999, screened and kept
     /// in best/ and each checkpoint's average/ (overrides training.ema_decay; may be switched
     /// on with --resume, starting from the checkpoint's weights).
@@ -120,6 +130,12 @@ fn resolve(args: &TrainArgs) -> Result<(TrainConfig, PathBuf, String)> {
     }
     if let Some(every) = args.screen_every {
         config.screening.every = every;
+    }
+    if let Some(every) = args.emd_every {
+        config.screening.emd_every = every;
+    }
+    if let Some(metric) = args.select_by {
+        config.screening.select_by = metric;
     }
     let origin = format!(
         "{} (with the command line's overrides)",

@@ -129,12 +129,12 @@ fn losses(out: &Path) -> Vec<(String, String, String, String)> {
     let mut lines = text.lines();
     assert_eq!(
         lines.next().unwrap(),
-        "step,loss,learning_rate,steps_per_second,valid_mse_acc1,valid_rollout_mse"
+        "step,loss,learning_rate,steps_per_second,valid_mse_acc1,valid_rollout_mse,valid_emd"
     );
     lines
         .map(|l| {
             let c: Vec<&str> = l.split(',').collect();
-            assert_eq!(c.len(), 6, "{l}");
+            assert_eq!(c.len(), 7, "{l}");
             (c[0].into(), c[1].into(), c[4].into(), c[5].into())
         })
         .collect()
@@ -453,6 +453,84 @@ fn train_refuses_what_it_cannot_run_and_names_why() {
     ));
     assert!(e.contains("another configuration"), "{e}");
     assert!(e.contains("training.ema_decay"), "{e}");
+}
+
+/// The `valid_*` columns of `train.csv`'s screening rows: `(step, rollout MSE, EMD)`.
+fn screenings(out: &Path) -> Vec<(u64, f64, Option<f64>)> {
+    let text = std::fs::read_to_string(out.join("train.csv")).unwrap();
+    text.lines()
+        .skip(1)
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|c| !c[5].is_empty())
+        .map(|c| {
+            (
+                c[0].parse().unwrap(),
+                c[5].parse().unwrap(),
+                c[6].parse().ok(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn the_screening_may_switch_to_emd_on_resume_and_then_picks_best_by_it() {
+    let dir = scratch("train-emd-screening");
+    let data = dataset(&dir);
+    let preset = tiny_preset(&dir, "tiny", "noise", 16);
+    let e = stderr(&train(
+        &data,
+        &preset,
+        &dir.join("refused"),
+        &["--select-by", "emd"],
+    ));
+    assert!(e.contains("screening.emd_every"), "{e}");
+    let whole = dir.join("whole");
+    ok(train(&data, &preset, &whole, &["--steps", "24"]));
+    let out = dir.join("run");
+    ok(train(&data, &preset, &out, &[]));
+    // Made as by a phi from before the EMD: a log without its column, a best without its metric.
+    let log = out.join("train.csv");
+    let old: String = std::fs::read_to_string(&log)
+        .unwrap()
+        .lines()
+        .map(|l| format!("{}\n", l.rsplit_once(',').unwrap().0))
+        .collect();
+    std::fs::write(&log, old).unwrap();
+    let state_path = out.join("checkpoints/step-0000000016/state.json");
+    let mut state: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&state_path).unwrap()).unwrap();
+    assert_eq!(state["best"]["metric"], "rollout_mse", "{state}");
+    state["best"].as_object_mut().unwrap().remove("metric");
+    std::fs::write(&state_path, serde_json::to_vec(&state).unwrap()).unwrap();
+    ok(resume(
+        &out,
+        &["--steps", "24", "--emd-every", "1", "--select-by", "emd"],
+    ));
+    // The screening changes no weight: the losses and the other screening columns are the
+    // uninterrupted run's.
+    assert_eq!(losses(&out), losses(&whole));
+    let rows = screenings(&out);
+    assert_eq!(
+        rows.iter()
+            .map(|r| (r.0, r.2.is_some()))
+            .collect::<Vec<_>>(),
+        [(8, false), (16, false), (24, true)]
+    );
+    // Every frame's EMD is at most the squared distance of the identity pairing: EMD ≤ d × MSE.
+    let (_, mse, emd) = rows[2];
+    let emd = emd.unwrap();
+    assert!(
+        emd > 0.0 && emd <= 2.0 * mse * (1.0 + 1e-9),
+        "{emd} vs {mse}"
+    );
+    // The best by rollout MSE was forgotten: step 24 is the first chosen by EMD.
+    let best: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("best/best.json")).unwrap()).unwrap();
+    assert_eq!(best["metric"], "valid_emd");
+    assert_eq!(best["step"], 24);
+    assert_eq!(best["value"].as_f64().unwrap(), emd);
+    let stored = std::fs::read_to_string(out.join("config.toml")).unwrap();
+    assert!(stored.contains("select_by = \"emd\""), "{stored}");
 }
 
 #[test]

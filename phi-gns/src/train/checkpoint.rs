@@ -19,6 +19,7 @@ use std::path::{Path, PathBuf};
 use phi_core::backend::Host;
 use serde::{Deserialize, Serialize};
 
+use super::config::SelectBy;
 use super::{Adam, AdamConfig, TrainError, WeightAverage};
 use crate::model::files::{tensors_to_bytes, weights_from_bytes};
 use crate::model::{Gns, GnsKernels, Parameters, load_model, save_model};
@@ -75,6 +76,9 @@ pub struct Best {
     pub step: u64,
     /// Its value of the selecting metric.
     pub value: f64,
+    /// The selecting metric (absent in checkpoints from before it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub metric: Option<SelectBy>,
 }
 
 /// `state.json` of a checkpoint.

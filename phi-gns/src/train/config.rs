@@ -166,6 +166,49 @@ pub enum SelectBy {
     /// The position error of the screening rollouts (the thesis picks by MSE 400: set
     /// `rollout_steps` to the trajectory length for that).
     RolloutMse,
+    /// The EMD of the screening rollouts' liquid (needs `emd_every ≥ 1`): where the liquid is,
+    /// the thesis's other headline metric.
+    Emd,
+}
+
+impl SelectBy {
+    /// Every metric.
+    pub const ALL: [SelectBy; 3] = [SelectBy::MseAcc1, SelectBy::RolloutMse, SelectBy::Emd];
+
+    /// Its name in a preset (`select_by = "…"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            SelectBy::MseAcc1 => "mse_acc1",
+            SelectBy::RolloutMse => "rollout_mse",
+            SelectBy::Emd => "emd",
+        }
+    }
+
+    /// The metric's name in `train.csv` and `best/best.json`.
+    pub fn column(self) -> &'static str {
+        match self {
+            SelectBy::MseAcc1 => "valid_mse_acc1",
+            SelectBy::RolloutMse => "valid_rollout_mse",
+            SelectBy::Emd => "valid_emd",
+        }
+    }
+}
+
+impl std::str::FromStr for SelectBy {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        SelectBy::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<_> = SelectBy::ALL.iter().map(|m| m.name()).collect();
+                format!(
+                    "'{s}' is not a screening metric (one of {})",
+                    names.join(", ")
+                )
+            })
+    }
 }
 
 /// `[screening]`.
@@ -183,6 +226,10 @@ pub struct ScreeningSection {
     /// Steps of the rollout from the first full input window of each trajectory (at most
     /// the trajectory's length minus `C`).
     pub rollout_steps: usize,
+    /// The EMD of every this many predicted frames of the screening rollouts (and of the
+    /// last); 0, the default: no EMD.
+    #[serde(default)]
+    pub emd_every: usize,
     /// The metric that picks the best checkpoint.
     pub select_by: SelectBy,
 }
@@ -351,6 +398,12 @@ impl TrainConfig {
         }
         if s.every > 0 && s.rollout_steps == 0 {
             return fail("screening.rollout_steps", "must be ≥ 1".into());
+        }
+        if s.select_by == SelectBy::Emd && s.emd_every == 0 {
+            return fail(
+                "screening.emd_every",
+                "select_by = \"emd\" needs the EMD: set emd_every ≥ 1".into(),
+            );
         }
         if self.data.read_ahead == 0 {
             return fail("data.read_ahead", "must be ≥ 1".into());
@@ -542,6 +595,30 @@ mod tests {
         assert!(e.contains("optimizer.clip_norm"), "{e}");
         let e = refusal(&text.replace("warmup_steps = 100", "warmup_steps = -3"));
         assert!(e.contains("optimizer.learning_rate.warmup_steps"), "{e}");
+    }
+
+    #[test]
+    fn the_emd_metric_needs_the_emd_and_names_agree_with_the_preset_keys() {
+        let text = preset();
+        assert!(text.contains("select_by = \"rollout_mse\""));
+        let e = refusal(&text.replace("\"rollout_mse\"", "\"emd\""));
+        assert!(e.contains("screening.emd_every"), "{e}");
+        for metric in SelectBy::ALL {
+            let with = text.replace(
+                "select_by = \"rollout_mse\"",
+                &format!("emd_every = 5\nselect_by = \"{}\"", metric.name()),
+            );
+            let c = TrainConfig::from_toml(&with, "preset.toml").unwrap();
+            assert_eq!(c.screening.select_by, metric);
+            assert_eq!(c.screening.emd_every, 5);
+            assert_eq!(metric.name().parse::<SelectBy>(), Ok(metric));
+            assert_eq!(TrainConfig::from_toml(&c.to_toml(), "stored").unwrap(), c);
+        }
+        let e = "emd2".parse::<SelectBy>().unwrap_err();
+        assert!(e.contains("mse_acc1, rollout_mse, emd"), "{e}");
+        // A preset from before the key reads as "no EMD".
+        let c = TrainConfig::from_toml(&text, "preset.toml").unwrap();
+        assert_eq!(c.screening.emd_every, 0);
     }
 
     #[test]

@@ -8,9 +8,11 @@
 //! - `train.csv`: a row every `training.log_every` steps — `step`, the mean `loss` since the
 //!   previous row, the `learning_rate` of the row's step, `steps_per_second` (of the training
 //!   steps since the previous row, screening left out) — and, on
-//!   screening rows, `valid_mse_acc1` and `valid_rollout_mse`;
+//!   screening rows, `valid_mse_acc1`, `valid_rollout_mse` and `valid_emd` (empty unless
+//!   `screening.emd_every ≥ 1`);
 //! - `checkpoints/step-…/`: the newest `checkpoints.keep` checkpoints (`checkpoint.rs`);
-//! - `best/`: the model with the best screening metric so far.
+//! - `best/`: the model with the best screening metric so far (the metric may change on
+//!   `--resume`; the next screening then replaces it).
 //! - `train.lock` ([`LOCK_FILE`]): the process id of the run while it is open, so that a
 //!   second run on the directory is refused; a killed run's lock is taken over.
 //!
@@ -39,7 +41,7 @@ use super::checkpoint::{
 };
 use super::config::{SelectBy, TrainConfig};
 use super::sampler::WindowSpec;
-use super::screening::{Screening, screen};
+use super::screening::{Screening, ScreeningPlan, screen};
 use super::step::take_step;
 use super::stream::{BatchConfig, BatchSource, BatchStream};
 use super::{Adam, TrainError, WeightAverage};
@@ -56,6 +58,9 @@ pub const CONFIG_FILE: &str = "config.toml";
 pub(crate) const LOG_FILE: &str = "train.csv";
 /// The header of [`LOG_FILE`].
 pub(crate) const LOG_HEADER: &str =
+    "step,loss,learning_rate,steps_per_second,valid_mse_acc1,valid_rollout_mse,valid_emd";
+/// The header of logs written before the screening measured EMD; a resumed run upgrades it.
+const LOG_HEADER_BEFORE_EMD: &str =
     "step,loss,learning_rate,steps_per_second,valid_mse_acc1,valid_rollout_mse";
 
 /// `train.json`.
@@ -159,7 +164,8 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
                     path: out.join(super::checkpoint::CHECKPOINTS_DIR),
                     reason: "no checkpoint to resume from".into(),
                 })?;
-            let (model, adam, state) = load_checkpoint::<B>(&dir, config.optimizer, device)?;
+            let (model, adam, mut state) = load_checkpoint::<B>(&dir, config.optimizer, device)?;
+            reconcile_best(out, &mut state, config.screening.select_by);
             if model.spec().config != spec.config {
                 return Err(TrainError::Checkpoint {
                     path: dir,
@@ -338,27 +344,31 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
         };
         let host = Gns::<Host>::new(self.model.spec().clone(), weights)?;
         let s = &self.config.screening;
-        let result = screen(
-            &host,
-            &self.valid,
-            s.window_stride,
-            s.rollout_steps,
-            &Default::default(),
-        )?;
-        let (metric, value) = match s.select_by {
-            SelectBy::MseAcc1 => ("valid_mse_acc1", result.mse_acc1),
-            SelectBy::RolloutMse => ("valid_rollout_mse", result.rollout_mse),
+        let plan = ScreeningPlan {
+            window_stride: s.window_stride,
+            rollout_steps: s.rollout_steps,
+            emd_every: s.emd_every,
         };
+        let result = screen(&host, &self.valid, plan, &Default::default())?;
+        let value = match s.select_by {
+            SelectBy::MseAcc1 => result.mse_acc1,
+            SelectBy::RolloutMse => result.rollout_mse,
+            // The configuration's check makes sure the EMD was measured.
+            SelectBy::Emd => result.emd.unwrap_or(f64::INFINITY),
+        };
+        let metric = s.select_by.column();
         tracing::info!(
             step = self.state.step,
             mse_acc1 = result.mse_acc1,
             rollout_mse = result.rollout_mse,
+            emd = result.emd,
             "screening"
         );
         if value.is_finite() && self.state.best.is_none_or(|b| value < b.value) {
             let best = Best {
                 step: self.state.step,
                 value,
+                metric: Some(s.select_by),
             };
             save_best(&self.out, &host, &best, metric)?;
             self.state.best = Some(best);
@@ -393,15 +403,46 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
         self.log_started = Instant::now();
         self.log_steps = 0;
         let loss = self.state.log.take_mean();
-        let (acc, rollout) = screening.map_or((String::new(), String::new()), |s| {
-            (s.mse_acc1.to_string(), s.rollout_mse.to_string())
-        });
+        let (acc, rollout, emd) =
+            screening.map_or((String::new(), String::new(), String::new()), |s| {
+                let emd = s.emd.map(|e| e.to_string()).unwrap_or_default();
+                (s.mse_acc1.to_string(), s.rollout_mse.to_string(), emd)
+            });
         let row = format!(
-            "{},{loss},{learning_rate},{rate:.4},{acc},{rollout}\n",
+            "{},{loss},{learning_rate},{rate:.4},{acc},{rollout},{emd}\n",
             self.state.step
         );
         append_log(&self.out.join(LOG_FILE), &row)
     }
+}
+
+/// Forgets the best screening result of a resumed run when it was chosen by another metric
+/// than `select_by` (the screening may change on `--resume`): the next screening starts the
+/// best afresh. A checkpoint from before the state named its metric takes `best/best.json`'s.
+fn reconcile_best(out: &Path, state: &mut CheckpointState, select_by: SelectBy) {
+    let Some(best) = &mut state.best else {
+        return;
+    };
+    if best.metric.is_none() {
+        best.metric = best_file_metric(out);
+    }
+    if best.metric != Some(select_by) {
+        tracing::info!(
+            step = best.step,
+            was = best.metric.map_or("an unknown metric", SelectBy::column),
+            now = select_by.column(),
+            "best/ was chosen by another metric: the next screening replaces it"
+        );
+        state.best = None;
+    }
+}
+
+/// The metric `best/best.json` of the run in `out` names, if it reads.
+fn best_file_metric(out: &Path) -> Option<SelectBy> {
+    let path = out.join(super::BEST_DIR).join(super::checkpoint::BEST_FILE);
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(path).ok()?).ok()?;
+    let name = json.get("metric")?.as_str()?;
+    SelectBy::ALL.into_iter().find(|m| m.column() == name)
 }
 
 /// The model of `dir` as the start of a run with `spec`: its weights, `spec`'s facts.
@@ -581,11 +622,13 @@ fn check_resumable(
     let mut same_steps = config.clone();
     same_steps.training.steps = stored.training.steps;
     same_steps.training.ema_decay = stored.training.ema_decay;
+    // The screening reads the weights and never changes them.
+    same_steps.screening = stored.screening.clone();
     if same_steps != stored {
         return Err(checkpoint_error(
             &stored_path,
-            "the run was made with another configuration (only training.steps and \
-             training.ema_decay may change on --resume)",
+            "the run was made with another configuration (only training.steps, \
+             training.ema_decay and [screening] may change on --resume)",
         ));
     }
     if record.backend != backend {
@@ -659,26 +702,40 @@ fn append_log(path: &Path, row: &str) -> Result<(), TrainError> {
         .map_err(|e| checkpoint_error(path, format!("cannot write: {e}")))
 }
 
-/// Cuts the log back to the rows of steps `≤ step` (and drops a row cut short by a kill).
+/// Cuts the log back to the rows of steps `≤ step` (and drops a row cut short by a kill). A
+/// log from before the EMD column gets the column, empty in its rows.
 fn truncate_log(path: &Path, step: u64) -> Result<(), TrainError> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| checkpoint_error(path, format!("cannot read: {e}")))?;
     let mut kept = String::with_capacity(text.len());
+    let mut upgrade = false;
     for (i, line) in text.split_inclusive('\n').enumerate() {
         if i == 0 {
-            if line.trim_end() != LOG_HEADER {
-                return Err(checkpoint_error(
-                    path,
-                    "not the log of phi train (another header)",
-                ));
+            match line.trim_end() {
+                LOG_HEADER => {}
+                LOG_HEADER_BEFORE_EMD => upgrade = true,
+                _ => {
+                    return Err(checkpoint_error(
+                        path,
+                        "not the log of phi train (another header)",
+                    ));
+                }
             }
-            kept.push_str(line);
+            kept.push_str(LOG_HEADER);
+            kept.push('\n');
             continue;
         }
         let complete = line.ends_with('\n');
         let row_step = line.split(',').next().and_then(|s| s.parse::<u64>().ok());
         match row_step {
-            Some(s) if complete && s <= step => kept.push_str(line),
+            Some(s) if complete && s <= step => {
+                if upgrade {
+                    kept.push_str(line.trim_end_matches('\n'));
+                    kept.push_str(",\n");
+                } else {
+                    kept.push_str(line);
+                }
+            }
             _ => {}
         }
     }
