@@ -26,6 +26,12 @@ pub struct ProbeArgs {
     /// Gravity in cells per second², one value per component (the random scenes': 0,-9.81).
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_values_t = [0.0, -9.81])]
     pub gravity: Vec<f64>,
+    /// Throw the block sideways at this many cells per second (along the first axis across
+    /// gravity; negative: the other way): its sideways acceleration, truth 0, is printed as
+    /// "along throw" (negative: drag). A test scene's block thrown at 0.25 cells a frame with
+    /// dt = 0.05 s is 5 cells/s.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub throw: f64,
     /// Particles per cell (the random scenes': 8).
     #[arg(long, default_value_t = 8)]
     pub particles_per_cell: usize,
@@ -111,11 +117,17 @@ fn mean_probe(
             metadata,
             input_velocities,
             &args.gravity,
+            args.throw,
             args.particles_per_cell,
             args.fallen,
             seed,
         )
-        .with_context(|| format!("--gravity {:?}, --fallen {}", args.gravity, args.fallen))?;
+        .with_context(|| {
+            format!(
+                "--gravity {:?}, --throw {}, --fallen {}",
+                args.gravity, args.throw, args.fallen
+            )
+        })?;
         results.push(run(&scene)?);
     }
     Ok(ProbeResult::mean(&results))
@@ -128,18 +140,30 @@ fn mean_probe(
 pub fn run(args: &ProbeArgs) -> Result<()> {
     let rows = probe_models(args)?;
     let width = rows.iter().map(|r| r.label.len()).max().unwrap_or(5).max(5);
+    let thrown = args.throw != 0.0;
     println!(
-        "one-step predictions as fractions of |g| (truth: falling 1 along, 0 across; resting 0)"
+        "one-step predictions as fractions of |g| (truth: falling 1 along, 0 across{}; resting 0)",
+        if thrown { ", 0 along throw" } else { "" }
     );
+    let throw_header = if thrown {
+        format!("  {:>13}", "along throw")
+    } else {
+        String::new()
+    };
     println!(
-        "{:width$}  {:>15}  {:>16}  {:>12}  {:>11}",
+        "{:width$}  {:>15}  {:>16}{throw_header}  {:>12}  {:>11}",
         "model", "falling, along", "falling, across", "resting mean", "resting rms"
     );
     for row in &rows {
         let r = &row.result;
         let g = r.gravity.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let throw_column = if thrown {
+            format!("  {:>13.3}", r.falling_along_throw)
+        } else {
+            String::new()
+        };
         println!(
-            "{:width$}  {:>15.3}  {:>16.3}  {:>12.3}  {:>11.3}",
+            "{:width$}  {:>15.3}  {:>16.3}{throw_column}  {:>12.3}  {:>11.3}",
             row.label,
             r.falling_along_gravity,
             r.falling_across_gravity,

@@ -1,6 +1,8 @@
 //! The cheapest signal of whether a model has learnt anything: its one-step prediction for a
 //! block of liquid in free fall, whose true acceleration is gravity, and for a pool at rest,
-//! whose true acceleration is zero.
+//! whose true acceleration is zero. The block may also be thrown sideways: its horizontal
+//! velocity stays what it is in free fall (Galilean invariance), so a model that slows it down
+//! (drag) or speeds it up has learnt a force that is not there.
 //!
 //! The scene is built analytically in the dataset's stored units, as the random scenes of
 //! thesis table 5.1 seed their liquid (a fixed number of particles per cell, uniformly at random
@@ -11,7 +13,8 @@
 //! fallen from rest for `fallen` frames before the window starts; its positions are
 //! `p₀ + ½ g (fallen + k)²` at window frame `k`, whose second difference is exactly `g`, so the
 //! truth needs no simulation: free fall is free fall in FLIP too (pressure is zero in a block
-//! surrounded by air).
+//! surrounded by air). A thrown block moves `u` per frame along the first axis across gravity
+//! as well, and is centred across at the frame after the window.
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -39,6 +42,9 @@ pub struct ProbeScene {
     pub falling: Vec<bool>,
     /// The true acceleration of the block per component, stored units per frame².
     pub gravity: Vec<f64>,
+    /// The block's velocity across gravity per component, stored units per frame (zeros when
+    /// it is not thrown).
+    pub throw: Vec<f64>,
 }
 
 /// A model's one-step predictions on the probe scene, as mean accelerations per component in
@@ -61,6 +67,10 @@ pub struct ProbeResult {
     pub falling_across_gravity: f64,
     /// The norm of the pool's mean predicted acceleration over `|g|` (truth: 0).
     pub resting_over_gravity: f64,
+    /// The falling block's predicted acceleration along its throw, over `|g|` (truth: 0;
+    /// negative: drag, positive: a push along the motion; 0 for a block that is not thrown).
+    #[serde(default)]
+    pub falling_along_throw: f64,
 }
 
 impl ProbeResult {
@@ -89,23 +99,27 @@ impl ProbeResult {
             falling_along_gravity: scalar(|r| r.falling_along_gravity),
             falling_across_gravity: scalar(|r| r.falling_across_gravity),
             resting_over_gravity: scalar(|r| r.resting_over_gravity),
+            falling_along_throw: scalar(|r| r.falling_along_throw),
         }
     }
 }
 
 /// The probe scene for models of a dataset of `metadata`, with `input_velocities` past
 /// velocities, gravity `gravity_cells` (cells per second², per component; the random scenes'
-/// is `[0, −9.81]`), `particles_per_cell` particles in each cell, the block `fallen` frames into
-/// its fall and jitter from `seed`.
+/// is `[0, −9.81]`), the block thrown at `throw_cells` cells per second along the first axis
+/// across gravity (0: dropped), `particles_per_cell` particles in each cell, the block `fallen`
+/// frames into its fall and jitter from `seed`.
 ///
 /// # Errors
 /// [`EvalError::Input`] when the domain is too small for the pool, the gap and the block, when
-/// `gravity_cells` has not `dim` components or is zero, or when the block would leave the
-/// domain within the window.
+/// `gravity_cells` has not `dim` components or is zero, when the throw is not finite or the
+/// domain has no axis across gravity for it, or when the block would leave the domain within
+/// the window.
 pub fn probe_scene(
     metadata: &Metadata,
     input_velocities: usize,
     gravity_cells: &[f64],
+    throw_cells: f64,
     particles_per_cell: usize,
     fallen: usize,
     seed: u64,
@@ -151,6 +165,30 @@ pub fn probe_scene(
         .iter()
         .map(|g| g * scale * metadata.dt * metadata.dt)
         .collect();
+    let across = (0..dim).find(|&a| a != vertical);
+    let throw_axis = match across {
+        _ if throw_cells == 0.0 => None,
+        Some(axis) if throw_cells.is_finite() => Some(axis),
+        Some(_) => return fail(format!("the throw must be finite, not {throw_cells}")),
+        None => return fail("a 1D domain has no axis across gravity to throw along".into()),
+    };
+    // The block's offset across (cells) at window frame `k`, centred at frame `C + 1`.
+    let throw_per_frame = throw_cells * metadata.dt;
+    let offset_across = |k: usize| throw_per_frame * (k as f64 - (input_velocities + 1) as f64);
+    if let Some(axis) = throw_axis {
+        let room = (cells[axis] - BLOCK_CELLS) as f64 / 2.0 - 1.0;
+        if offset_across(0).abs() > room {
+            return fail(format!(
+                "a throw of {throw_cells} cells/s moves the block {:.1} cells across the window: \
+                 more than the {room} cells between it and the walls",
+                offset_across(0).abs()
+            ));
+        }
+    }
+    let mut throw = vec![0.0f64; dim];
+    if let Some(axis) = throw_axis {
+        throw[axis] = throw_per_frame * scale;
+    }
     // The block's lowest cell row (counted from the pool's wall) at frame `fallen + C + 1`,
     // the one after the window; it starts higher by the fall it makes until then.
     let frames = (fallen + input_velocities + 1) as f64;
@@ -213,7 +251,12 @@ pub fn probe_scene(
                 let x_cells = start[i * dim + axis];
                 let x = if falling[i] {
                     let lift = -gravity_cells[axis] * 0.5 * (frames * metadata.dt).powi(2);
-                    (x_cells + lift) * scale + offset + 0.5 * g_stored[axis] * t * t
+                    let across = if throw_axis == Some(axis) {
+                        offset_across(k)
+                    } else {
+                        0.0
+                    };
+                    (x_cells + lift + across) * scale + offset + 0.5 * g_stored[axis] * t * t
                 } else {
                     x_cells * scale + offset
                 };
@@ -226,6 +269,7 @@ pub fn probe_scene(
         particle_type: vec![LIQUID; n],
         falling,
         gravity: g_stored,
+        throw,
     })
 }
 
@@ -286,6 +330,17 @@ pub fn probe<B: GnsKernels>(
         .max(0.0)
         .sqrt();
     let resting_norm = resting.iter().map(|a| a * a).sum::<f64>().sqrt();
+    let u_norm = scene.throw.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let along_throw = if u_norm > 0.0 {
+        falling
+            .iter()
+            .zip(&scene.throw)
+            .map(|(a, u)| a * u)
+            .sum::<f64>()
+            / u_norm
+    } else {
+        0.0
+    };
     Ok(ProbeResult {
         gravity: g.clone(),
         falling,
@@ -294,5 +349,6 @@ pub fn probe<B: GnsKernels>(
         falling_along_gravity: along / g_norm,
         falling_across_gravity: across / g_norm,
         resting_over_gravity: resting_norm / g_norm,
+        falling_along_throw: along_throw / g_norm,
     })
 }

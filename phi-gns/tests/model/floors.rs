@@ -18,7 +18,7 @@ const G: [f64; 2] = [0.0, -9.81];
 fn a_floor_predicts_its_constant_acceleration_everywhere() {
     let metadata = common::metadata();
     let device = NdArray::default_device();
-    let scene = probe_scene(&metadata, 5, &G, 8, 4, 1).unwrap();
+    let scene = probe_scene(&metadata, 5, &G, 0.0, 8, 4, 1).unwrap();
     let n = scene.particle_type.len();
     for floor in Floor::ALL {
         let model = floor.model::<NdArray>(&metadata, 5, &device).unwrap();
@@ -63,7 +63,7 @@ fn a_floor_predicts_its_constant_acceleration_everywhere() {
 fn the_probe_scene_falls_with_gravity_above_a_pool_at_rest() {
     let metadata = common::metadata();
     let c = 5;
-    let scene = probe_scene(&metadata, c, &G, 8, 4, 3).unwrap();
+    let scene = probe_scene(&metadata, c, &G, 0.0, 8, 4, 3).unwrap();
     let n = scene.particle_type.len();
     assert!(scene.particle_type.iter().all(|&t| t == LIQUID));
     let falling = scene.falling.iter().filter(|f| **f).count();
@@ -104,7 +104,7 @@ fn the_probe_scene_falls_with_gravity_above_a_pool_at_rest() {
     assert!(pool_top <= lo + 4.0 * metadata.position_scale);
     assert!(block_bottom - pool_top > 10.0 * metadata.position_scale);
     // Another seed jitters the particles, not the layout.
-    let other = probe_scene(&metadata, c, &G, 8, 4, 4).unwrap();
+    let other = probe_scene(&metadata, c, &G, 0.0, 8, 4, 4).unwrap();
     assert_eq!(other.falling, scene.falling);
     assert_ne!(other.window, scene.window);
 }
@@ -113,7 +113,7 @@ fn the_probe_scene_falls_with_gravity_above_a_pool_at_rest() {
 fn the_probe_reads_the_floors_as_fractions_of_gravity() {
     let mut metadata = common::metadata();
     let device = NdArray::default_device();
-    let scene = probe_scene(&metadata, 5, &G, 8, 4, 0).unwrap();
+    let scene = probe_scene(&metadata, 5, &G, 0.0, 8, 4, 0).unwrap();
     // A dataset whose mean acceleration is gravity: the mean-acceleration floor is exact for
     // the falling block and wrong by |g| for the pool.
     metadata.acc_mean = scene.gravity.clone();
@@ -139,18 +139,78 @@ fn the_probe_reads_the_floors_as_fractions_of_gravity() {
 }
 
 #[test]
+fn a_thrown_block_keeps_its_sideways_velocity_and_the_probe_reads_drag_with_its_sign() {
+    let mut metadata = common::metadata();
+    let device = NdArray::default_device();
+    let c = 5;
+    let throw = 5.0; // cells per second
+    let scene = probe_scene(&metadata, c, &G, throw, 8, 4, 2).unwrap();
+    let u = throw * metadata.dt * metadata.position_scale;
+    assert_eq!(scene.throw, vec![u, 0.0]);
+    let dropped = probe_scene(&metadata, c, &G, 0.0, 8, 4, 2).unwrap();
+    assert_eq!(dropped.throw, vec![0.0, 0.0]);
+    let centre = 0.5 * (metadata.bounds[0][0] + metadata.bounds[0][1]);
+    let (mut sum, mut count) = (0.0, 0usize);
+    for i in 0..scene.falling.len() {
+        let at = |w: &[f32], k: usize, a: usize| f64::from(w[(i * (c + 1) + k) * 2 + a]);
+        for k in 1..=c {
+            let first = at(&scene.window, k, 0) - at(&scene.window, k - 1, 0);
+            let want = if scene.falling[i] { u } else { 0.0 };
+            assert!((first - want).abs() < 2e-7, "particle {i} frame {k}");
+            // The vertical motion is the dropped block's.
+            let dy = at(&scene.window, k, 1) - at(&dropped.window, k, 1);
+            assert!(dy.abs() < 1e-7, "particle {i} frame {k}");
+        }
+        if scene.falling[i] {
+            // Extrapolated to the frame after the window, where the block is centred across.
+            sum += at(&scene.window, c, 0) + u;
+            count += 1;
+        }
+    }
+    // The mean of the jitter (uniform in each cell, 288 particles) is within a tenth of a cell.
+    let mean = sum / count as f64;
+    assert!(
+        (mean - centre).abs() < 0.1 * metadata.position_scale,
+        "{mean} vs {centre}"
+    );
+    // A model whose prediction is gravity plus a tenth of |g| against the +x axis reads as drag
+    // for a block thrown along +x and as a push for one thrown along −x.
+    let g = scene.gravity[1].abs();
+    metadata.acc_mean = vec![-0.1 * g, scene.gravity[1]];
+    let braking = Floor::MeanAcceleration
+        .model::<NdArray>(&metadata, c, &device)
+        .unwrap();
+    let r = probe(&braking, &scene, &device).unwrap();
+    assert!((r.falling_along_throw + 0.1).abs() < 1e-4, "{r:?}");
+    assert!((r.falling_across_gravity - 0.1).abs() < 1e-4, "{r:?}");
+    let back = probe_scene(&metadata, c, &G, -throw, 8, 4, 2).unwrap();
+    let r = probe(&braking, &back, &device).unwrap();
+    assert!((r.falling_along_throw - 0.1).abs() < 1e-4, "{r:?}");
+    let r = probe(&braking, &dropped, &device).unwrap();
+    assert_eq!(r.falling_along_throw, 0.0);
+}
+
+#[test]
 fn a_probe_scene_that_does_not_fit_is_refused() {
     let metadata = common::metadata();
-    let error = probe_scene(&metadata, 5, &[0.0], 8, 4, 0)
+    let error = probe_scene(&metadata, 5, &[0.0], 0.0, 8, 4, 0)
         .unwrap_err()
         .to_string();
     assert!(error.contains("gravity has 1 components"), "{error}");
-    let error = probe_scene(&metadata, 5, &[0.0, 0.0], 8, 4, 0)
+    let error = probe_scene(&metadata, 5, &[0.0, 0.0], 0.0, 8, 4, 0)
         .unwrap_err()
         .to_string();
     assert!(error.contains("not zero"), "{error}");
-    let error = probe_scene(&metadata, 5, &G, 8, 60, 0)
+    let error = probe_scene(&metadata, 5, &G, 0.0, 8, 60, 0)
         .unwrap_err()
         .to_string();
     assert!(error.contains("fewer fallen frames"), "{error}");
+    let error = probe_scene(&metadata, 5, &G, 400.0, 8, 4, 0)
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("between it and the walls"), "{error}");
+    let error = probe_scene(&metadata, 5, &G, f64::NAN, 8, 4, 0)
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("finite"), "{error}");
 }
