@@ -5,8 +5,9 @@ use std::path::PathBuf;
 
 use phi_core::Backend;
 use phi_core::backend::burn::Burn;
-use phi_gns::train::TrainConfig;
-use phi_gns::train::run::{CONFIG_FILE, RunOptions, TrainRecord, TrainingRun};
+use phi_gns::train::config::SelectBy;
+use phi_gns::train::options::{Overrides, RunSource};
+use phi_gns::train::run::{RunOptions, TrainingRun};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -14,93 +15,6 @@ use crate::error::{Area, Error, detached};
 
 /// The backend that trains: Burn on the CPU, the one of this build with autodiff.
 type Autodiff = Burn;
-
-/// The overrides of `phi train`'s options, applied to a preset.
-struct Overrides {
-    steps: Option<u64>,
-    batch_size: Option<usize>,
-    seed: Option<u64>,
-    noise_std: Option<f64>,
-    extra_steps: Option<usize>,
-    log_every: Option<u64>,
-    checkpoint_every: Option<u64>,
-    screen_every: Option<u64>,
-    ema_decay: Option<f64>,
-}
-
-/// The configuration, dataset and preset name of a run, as `phi train` resolves its options:
-/// a new run needs `config` and `data`; `resume` reads the run's own `config.toml` and dataset
-/// unless they are given.
-fn resolve(
-    out: &std::path::Path,
-    data: Option<PathBuf>,
-    config: Option<PathBuf>,
-    resume: bool,
-    overrides: &Overrides,
-) -> Result<(TrainConfig, PathBuf, String), Error> {
-    let (preset, stored_data) = if resume {
-        let record = TrainRecord::read(out)?;
-        (
-            config.unwrap_or_else(|| out.join(CONFIG_FILE)),
-            Some(record.dataset),
-        )
-    } else {
-        let Some(config) = config else {
-            return Err(Error::argument(
-                Area::Training,
-                "train: config",
-                "a preset is needed for a new run (e.g. configs/gns/cpu/1sn.toml)",
-            ));
-        };
-        (config, None)
-    };
-    let mut c = TrainConfig::from_file(&preset)?;
-    let t = &mut c.training;
-    let o = overrides;
-    if let Some(v) = o.steps {
-        t.steps = v;
-    }
-    if let Some(v) = o.batch_size {
-        t.batch_size = v;
-    }
-    if let Some(v) = o.seed {
-        t.seed = v;
-    }
-    if let Some(v) = o.extra_steps {
-        t.extra_steps = v;
-    }
-    if let Some(v) = o.log_every {
-        t.log_every = v;
-    }
-    if let Some(v) = o.ema_decay {
-        t.ema_decay = Some(v);
-    }
-    if let Some(v) = o.noise_std {
-        c.model.noise_std = v;
-    }
-    if let Some(v) = o.checkpoint_every {
-        c.checkpoints.every = v;
-    }
-    if let Some(v) = o.screen_every {
-        c.screening.every = v;
-    }
-    c.validate(&format!(
-        "{} (with the arguments' overrides)",
-        preset.display()
-    ))?;
-    let data = match (data, stored_data) {
-        (Some(data), _) => data,
-        (None, Some(stored)) => stored,
-        (None, None) => {
-            return Err(Error::argument(
-                Area::Training,
-                "train: data",
-                "a dataset is needed for a new run",
-            ));
-        }
-    };
-    Ok((c, data, preset.display().to_string()))
-}
 
 /// Trains a GNS as ``phi train`` does, into the training directory ``out`` (``train.json``,
 /// ``config.toml``, ``train.csv``, ``checkpoints/``, ``best/``), on the Burn backend. The same
@@ -116,7 +30,8 @@ fn resolve(
 ///     resume: continue from the newest checkpoint in ``out``.
 ///     init_from: a model directory whose weights the run starts from.
 ///     batch_size, seed, noise_std, extra_steps, log_every, checkpoint_every, screen_every,
-///         ema_decay: override the preset's values, as ``phi train``'s options do.
+///         emd_every, select_by, ema_decay: override the preset's values, as ``phi train``'s
+///         options do (``select_by``: ``"mse_acc1"``, ``"rollout_mse"`` or ``"emd"``).
 ///     progress: called after every step as ``progress(step, total, loss, learning_rate)``;
 ///         an exception it raises stops the run after a checkpoint and is raised again.
 ///
@@ -132,7 +47,7 @@ fn resolve(
 ///
 /// The GIL is released during each step.
 #[pyfunction]
-#[pyo3(signature = (out, data = None, config = None, steps = None, resume = false, init_from = None, batch_size = None, seed = None, noise_std = None, extra_steps = None, log_every = None, checkpoint_every = None, screen_every = None, ema_decay = None, progress = None))]
+#[pyo3(signature = (out, data = None, config = None, steps = None, resume = false, init_from = None, batch_size = None, seed = None, noise_std = None, extra_steps = None, log_every = None, checkpoint_every = None, screen_every = None, emd_every = None, select_by = None, ema_decay = None, progress = None))]
 #[allow(clippy::too_many_arguments)] // Python's keyword arguments
 pub fn train<'py>(
     py: Python<'py>,
@@ -149,6 +64,8 @@ pub fn train<'py>(
     log_every: Option<u64>,
     checkpoint_every: Option<u64>,
     screen_every: Option<u64>,
+    emd_every: Option<usize>,
+    select_by: Option<String>,
     ema_decay: Option<f64>,
     progress: Option<Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
@@ -160,6 +77,38 @@ pub fn train<'py>(
         )
         .into());
     }
+    let select_by = select_by
+        .map(|name| name.parse::<SelectBy>())
+        .transpose()
+        .map_err(|reason| Error::argument(Area::Training, "train: select_by", &reason))?;
+    let source = if resume {
+        RunSource::Resume {
+            preset: config,
+            data,
+        }
+    } else {
+        let Some(preset) = config else {
+            return Err(Error::argument(
+                Area::Training,
+                "train: config",
+                "a preset is needed for a new run (e.g. configs/gns/cpu/1sn.toml)",
+            )
+            .into());
+        };
+        let Some(data) = data else {
+            return Err(Error::argument(
+                Area::Training,
+                "train: data",
+                "a dataset is needed for a new run",
+            )
+            .into());
+        };
+        RunSource::New {
+            preset,
+            data,
+            init_from,
+        }
+    };
     let overrides = Overrides {
         steps,
         batch_size,
@@ -169,19 +118,13 @@ pub fn train<'py>(
         log_every,
         checkpoint_every,
         screen_every,
+        emd_every,
+        select_by,
         ema_decay,
     };
     let target = out.clone();
     let mut run = detached(py, move || {
-        let (config, data, preset) = resolve(&target, data, config, resume, &overrides)?;
-        let options = RunOptions {
-            out: target,
-            data,
-            config,
-            preset,
-            init_from,
-            resume,
-        };
+        let options = RunOptions::resolve(target, source, &overrides)?;
         Ok(TrainingRun::<Autodiff>::open(
             &options,
             &Autodiff::default_device(),

@@ -121,3 +121,7 @@ def test_train_refusals(dataset_dir, preset, tmp_path):
         phi_rs.train(tmp_path / "c", resume=True, init_from=tmp_path)
     with pytest.raises(phi_rs.DatasetError, match="no-data"):
         phi_rs.train(tmp_path / "d", data=tmp_path / "no-data", config=preset)
+    with pytest.raises(phi_rs.TrainingError, match="not a screening metric"):
+        phi_rs.train(tmp_path / "e", data=dataset_dir, config=preset, select_by="emd2")
+    with pytest.raises(phi_rs.TrainingError, match="screening.emd_every"):
+        phi_rs.train(tmp_path / "f", data=dataset_dir, config=preset, select_by="emd")

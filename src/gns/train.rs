@@ -14,9 +14,9 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use phi_core::AutodiffBackend;
 use phi_gns::model::GnsKernels;
-use phi_gns::train::TrainConfig;
 use phi_gns::train::config::SelectBy;
-use phi_gns::train::run::{CONFIG_FILE, RunOptions, TrainRecord, TrainingRun};
+use phi_gns::train::options::{Overrides, RunSource};
+use phi_gns::train::run::{RunOptions, TrainingRun};
 
 use crate::backends::BackendKind;
 
@@ -86,68 +86,46 @@ pub struct TrainArgs {
     pub ema_decay: Option<f64>,
 }
 
-/// The configuration, dataset and preset name of `args`.
-fn resolve(args: &TrainArgs) -> Result<(TrainConfig, PathBuf, String)> {
-    let (preset_path, stored_data) = if args.resume {
-        let record = TrainRecord::read(&args.out).context("--resume")?;
-        (
-            args.config
-                .clone()
-                .unwrap_or_else(|| args.out.join(CONFIG_FILE)),
-            Some(record.dataset),
-        )
+/// The run `args` ask for: the preset and dataset (of a new run, or the resumed run's own
+/// unless given) with the command line's overrides.
+fn resolve(args: &TrainArgs) -> Result<RunOptions> {
+    let source = if args.resume {
+        RunSource::Resume {
+            preset: args.config.clone(),
+            data: args.data.clone(),
+        }
     } else {
-        let Some(config) = args.config.clone() else {
+        let Some(preset) = args.config.clone() else {
             bail!("--config PRESET is needed for a new run (e.g. configs/gns/cpu/1sn.toml)");
         };
-        (config, None)
+        let Some(data) = args.data.clone() else {
+            bail!("--data DATASET is needed for a new run");
+        };
+        RunSource::New {
+            preset,
+            data,
+            init_from: args.init_from.clone(),
+        }
     };
-    let mut config = TrainConfig::from_file(&preset_path)?;
-    let t = &mut config.training;
-    if let Some(steps) = args.steps {
-        t.steps = steps;
-    }
-    if let Some(b) = args.batch_size {
-        t.batch_size = b;
-    }
-    if let Some(seed) = args.seed {
-        t.seed = seed;
-    }
-    if let Some(n) = args.extra_steps {
-        t.extra_steps = n;
-    }
-    if let Some(every) = args.log_every {
-        t.log_every = every;
-    }
-    if let Some(decay) = args.ema_decay {
-        t.ema_decay = Some(decay);
-    }
-    if let Some(sigma) = args.noise_std {
-        config.model.noise_std = sigma;
-    }
-    if let Some(every) = args.checkpoint_every {
-        config.checkpoints.every = every;
-    }
-    if let Some(every) = args.screen_every {
-        config.screening.every = every;
-    }
-    if let Some(every) = args.emd_every {
-        config.screening.emd_every = every;
-    }
-    if let Some(metric) = args.select_by {
-        config.screening.select_by = metric;
-    }
-    let origin = format!(
-        "{} (with the command line's overrides)",
-        preset_path.display()
-    );
-    config.validate(&origin)?;
-    let data = match (&args.data, stored_data) {
-        (Some(data), _) => data.clone(),
-        (None, Some(stored)) => stored,
-        (None, None) => bail!("--data DATASET is needed for a new run"),
+    let overrides = Overrides {
+        steps: args.steps,
+        batch_size: args.batch_size,
+        seed: args.seed,
+        noise_std: args.noise_std,
+        extra_steps: args.extra_steps,
+        log_every: args.log_every,
+        checkpoint_every: args.checkpoint_every,
+        screen_every: args.screen_every,
+        emd_every: args.emd_every,
+        select_by: args.select_by,
+        ema_decay: args.ema_decay,
     };
-    Ok((config, data, preset_path.display().to_string()))
+    let options = RunOptions::resolve(args.out.clone(), source, &overrides);
+    if args.resume {
+        options.context("--resume")
+    } else {
+        Ok(options?)
+    }
 }
 
 /// Runs `phi train`.
@@ -157,15 +135,7 @@ fn resolve(args: &TrainArgs) -> Result<(TrainConfig, PathBuf, String)> {
 /// directories that hold something else, a diverged run (naming the step), an interrupted run
 /// (after its checkpoint is written), I/O errors.
 pub fn run(args: TrainArgs) -> Result<()> {
-    let (config, data, preset) = resolve(&args)?;
-    let options = RunOptions {
-        out: args.out.clone(),
-        data,
-        config,
-        preset,
-        init_from: args.init_from.clone(),
-        resume: args.resume,
-    };
+    let options = resolve(&args)?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = Arc::clone(&stop);
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))

@@ -28,6 +28,7 @@ mod error;
 pub mod loss;
 pub mod multistep;
 pub mod noise;
+pub mod options;
 pub mod pushforward;
 pub(crate) mod rng;
 pub mod run;

@@ -306,6 +306,8 @@ def train(
     log_every: Optional[int] = None,
     checkpoint_every: Optional[int] = None,
     screen_every: Optional[int] = None,
+    emd_every: Optional[int] = None,
+    select_by: Optional[str] = None,
     ema_decay: Optional[float] = None,
     progress: Optional[Callable[[int, int, float, float], Any]] = None,
 ) -> Dict[str, Any]:
