@@ -15,7 +15,7 @@ pub const MODEL_FORMAT: &str = "phi-gns-model";
 pub const MODEL_FORMAT_VERSION: u32 = 1;
 
 /// The sizes and options of a GNS (Sanchez-Gonzalez et al. 2020; thesis section 5.1). Every key
-/// but `walls` is required in `model.json`; unknown keys are errors.
+/// but `walls` and `obstacles` is required in `model.json`; unknown keys are errors.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GnsConfig {
@@ -47,6 +47,9 @@ pub struct GnsConfig {
     /// What a rollout does at the domain's walls (absent: [`Walls::Open`]).
     #[serde(default, skip_serializing_if = "Walls::is_open")]
     pub walls: Walls,
+    /// What a rollout does with liquid predicted inside an obstacle (absent: [`Obstacles::Open`]).
+    #[serde(default, skip_serializing_if = "Obstacles::is_open")]
+    pub obstacles: Obstacles,
 }
 
 /// What a rollout does with a predicted position beyond the domain's walls (the model's
@@ -71,6 +74,38 @@ impl Walls {
     /// Whether this is [`Walls::Open`] (the default, left out of `model.json`).
     pub fn is_open(&self) -> bool {
         *self == Walls::Open
+    }
+}
+
+/// What a rollout does with a liquid particle predicted inside an obstacle.
+///
+/// As with [`Walls`], the network never sees this. A model knows a dataset's obstacles only as
+/// kinematic particles, one at the centre of each grid cell whose centre lies inside an obstacle;
+/// [`Obstacles::Push`] takes the cell around each of them as solid and moves a particle predicted
+/// inside one to the nearest point outside, as the FLIP solver that made the data ends each of
+/// its steps by pushing its particles out of the obstacles. In `model.json`:
+/// `"obstacles": {"kind": "push", "cell_size": 0.03125}`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase", tag = "kind", deny_unknown_fields)]
+pub enum Obstacles {
+    /// The predicted positions are taken as they are (DeepMind's GNS).
+    #[default]
+    Open,
+    /// A predicted position inside the cell of a kinematic particle (the square or cube of side
+    /// `cell_size` centred on it, moving with it) is moved out of the union of those cells along
+    /// the axis that moves it least, and no gradient flows through it; the next velocity, read
+    /// from the window, loses the part into the obstacle.
+    Push {
+        /// The side of a grid cell in stored units: the dataset's `position_scale`, the spacing
+        /// of its obstacle particles.
+        cell_size: f64,
+    },
+}
+
+impl Obstacles {
+    /// Whether this is [`Obstacles::Open`] (the default, left out of `model.json`).
+    pub fn is_open(&self) -> bool {
+        *self == Obstacles::Open
     }
 }
 
@@ -117,6 +152,7 @@ impl GnsConfig {
             boundary_features: true,
             noise_std: 0.0,
             walls: Walls::Open,
+            obstacles: Obstacles::Open,
         }
     }
 
@@ -234,6 +270,14 @@ impl GnsConfig {
             return fail(
                 "noise_std",
                 format!("{} is not a number ≥ 0", self.noise_std),
+            );
+        }
+        if let Obstacles::Push { cell_size } = self.obstacles
+            && !(cell_size.is_finite() && cell_size > 0.0)
+        {
+            return fail(
+                "obstacles.cell_size",
+                format!("{cell_size} is not a positive number"),
             );
         }
         Ok(())

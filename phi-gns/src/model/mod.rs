@@ -44,7 +44,7 @@ pub mod kernels;
 pub mod network;
 pub mod params;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use phi_core::error::TensorError;
 use phi_core::tensor::Tensor;
@@ -52,7 +52,8 @@ use phi_core::tensor::Tensor;
 use crate::graph::GraphError;
 pub use batch::GraphBatch;
 pub use config::{
-    ConfigOverrides, GnsConfig, MODEL_FORMAT, MODEL_FORMAT_VERSION, ModelSpec, Normalisation, Walls,
+    ConfigOverrides, GnsConfig, MODEL_FORMAT, MODEL_FORMAT_VERSION, ModelSpec, Normalisation,
+    Obstacles, Walls,
 };
 pub use features::Normalisers;
 pub use files::{MODEL_FILE, WEIGHTS_FILE, load_model, read_spec, save_model};
@@ -273,6 +274,18 @@ impl<B: GnsKernels> Gns<B> {
         let mut model = self.clone();
         model.spec.config.walls = walls;
         model
+    }
+
+    /// The same model with another treatment of liquid predicted inside obstacles for its
+    /// rollouts ([`Obstacles`]); the network and its predictions of one step are unchanged.
+    ///
+    /// # Errors
+    /// [`ModelError::Config`] for a cell size that is not a positive number.
+    pub fn with_obstacles(&self, obstacles: Obstacles) -> Result<Self, ModelError> {
+        let mut model = self.clone();
+        model.spec.config.obstacles = obstacles;
+        model.spec.config.validate(Path::new("obstacles"))?;
+        Ok(model)
     }
 
     /// The network's output: the normalised acceleration `[N, dim]` of every particle.

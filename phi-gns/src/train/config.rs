@@ -459,6 +459,7 @@ impl TrainConfig {
             boundary_features: m.boundary_features,
             noise_std: m.noise_std,
             walls: m.walls,
+            obstacles: crate::model::Obstacles::Open,
         };
         let spec = ModelSpec::for_dataset(metadata, config, m.seed);
         spec.validate(metadata_path).map_err(|e| match e {

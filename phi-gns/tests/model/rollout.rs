@@ -1,11 +1,14 @@
 //! Rollouts on small synthetic trajectories: kinematic particles follow the ground truth, the
 //! predictions feed back into the window, ranges are checked, and a rollout that produces a
 //! non-finite position stops there with the frames before it delivered; clamped walls stop a
-//! particle at the wall and leave its motion along it.
+//! particle at the wall and leave its motion along it, and so does an obstacle it is pushed out
+//! of.
 
 use phi_core::Tensor;
 use phi_gns::data::{LIQUID, OBSTACLE, Trajectory};
-use phi_gns::model::{Floor, Gns, GnsKernels, GraphBatch, ModelError, Parameters, Walls};
+use phi_gns::model::{
+    Floor, Gns, GnsKernels, GraphBatch, ModelError, Obstacles, Parameters, Walls,
+};
 use phi_gns::rollout::{Rollout, RolloutRange, TrajectoryRollout, rollout, rollout_positions};
 
 use crate::common::{self, Rng, bits, perturbed};
@@ -17,6 +20,7 @@ phi_core::backend_tests!(
     the_device_stepper_equals_a_window_rebuilt_on_the_host_every_step,
     the_stepper_reads_each_frame_once_and_slides_it_in,
     clamped_walls_stop_a_particle_at_the_wall_and_keep_its_motion_along_it,
+    pushing_out_of_obstacles_stops_a_particle_at_a_thin_wall_it_would_cross,
 );
 
 /// `C` of the models here (the thesis' 5).
@@ -460,5 +464,106 @@ fn clamped_walls_stop_a_particle_at_the_wall_and_keep_its_motion_along_it<B: Gns
     assert!(
         free[steps - 1][0] > 1.0,
         "the open rollout leaves the domain"
+    );
+}
+
+/// The constant-velocity floor rolled out beside a vertical wall one obstacle cell thick (cells
+/// of side 0.025 from the lower bound 0.1: the column of cell 20, x from 0.6 to 0.625, centres
+/// at x = 0.6125, rows 6 to 20). One liquid particle moves towards it at 0.01 a frame (less than
+/// half a cell) and slowly up; another moves in the open. Open, the first runs through the
+/// wall; pushed, it is never inside a wall cell, ends on the wall's near face (x = 0.6) after
+/// the step that enters the cell, keeps its motion along the wall, and the second moves exactly
+/// as in the open rollout.
+fn pushing_out_of_obstacles_stops_a_particle_at_a_thin_wall_it_would_cross<B: GnsKernels>() {
+    let device = B::default_device();
+    let metadata = common::metadata();
+    let open = Floor::ConstantVelocity
+        .model::<B>(&metadata, C, &device)
+        .unwrap();
+    assert_eq!(open.spec().config.obstacles, Obstacles::Open);
+    let cell = 0.025f32;
+    let pushed = open
+        .with_obstacles(Obstacles::Push {
+            cell_size: f64::from(cell),
+        })
+        .unwrap();
+    assert!(
+        open.with_obstacles(Obstacles::Push { cell_size: 0.0 })
+            .is_err(),
+        "a zero cell is refused"
+    );
+    let wall: Vec<[f32; 2]> = (6..=20)
+        .map(|j| [0.1 + cell * 20.5, 0.1 + cell * (j as f32 + 0.5)])
+        .collect();
+    let (start, velocity) = (
+        [[0.553f32, 0.40], [0.30, 0.50]],
+        [[0.01f32, 0.002], [-0.005, 0.0]],
+    );
+    let mut types = vec![OBSTACLE; wall.len()];
+    types.extend([LIQUID, LIQUID]);
+    let n = types.len();
+    let frames: Vec<Vec<f32>> = (0..=C)
+        .map(|t| {
+            let t = t as f32 - C as f32;
+            let mut frame: Vec<f32> = wall.iter().flatten().copied().collect();
+            for i in 0..2 {
+                frame.extend((0..2).map(|a| start[i][a] + velocity[i][a] * t));
+            }
+            frame
+        })
+        .collect();
+    let refs: Vec<&[f32]> = frames.iter().map(Vec::as_slice).collect();
+    let kinematic = Tensor::from_slice(&frames[C], &[n, 2], &device).unwrap();
+    let steps = 12;
+    let run = |model: &Gns<B>| -> Vec<Vec<f32>> {
+        let batch =
+            GraphBatch::from_host(&window(&refs, n), &types, model.spec(), &device).unwrap();
+        let mut stepper = Rollout::new(model, batch).unwrap();
+        (0..steps)
+            .map(|_| {
+                stepper.step(&kinematic).unwrap();
+                stepper.read().to_vec()
+            })
+            .collect()
+    };
+    let (free, walled) = (run(&open), run(&pushed));
+    let first = 2 * wall.len();
+    let in_wall = |p: &[f32]| {
+        wall.iter()
+            .any(|q| (p[0] - q[0]).abs() < 0.5 * cell && (p[1] - q[1]).abs() < 0.5 * cell)
+    };
+    for k in 1..=steps {
+        let (f, w) = (&free[k - 1], &walled[k - 1]);
+        assert_eq!(&w[..first], &frames[C][..first], "the wall stays, step {k}");
+        let mover = &w[first..first + 2];
+        assert!(
+            !in_wall(mover),
+            "pushed, step {k}: {mover:?} inside the wall"
+        );
+        assert!(
+            (mover[1] - (start[0][1] + velocity[0][1] * k as f32)).abs() < 1e-5,
+            "pushed, step {k}: {mover:?} lost its motion along the wall"
+        );
+        if k >= 5 {
+            // Step 5 would put it at 0.603, inside: it lands on the near face and stays there.
+            assert!(
+                (mover[0] - 0.6).abs() < 1e-4,
+                "pushed, step {k}: {mover:?} not on the wall's face"
+            );
+        } else {
+            assert_eq!(mover[0].to_bits(), f[first].to_bits(), "step {k}");
+        }
+        for a in 0..2 {
+            assert_eq!(
+                w[first + 2 + a].to_bits(),
+                f[first + 2 + a].to_bits(),
+                "pushed, the other particle, step {k}"
+            );
+        }
+    }
+    assert!(
+        free[steps - 1][first] > 0.625,
+        "the open rollout runs through the wall: {:?}",
+        &free[steps - 1][first..first + 2]
     );
 }

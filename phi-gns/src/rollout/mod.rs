@@ -25,10 +25,12 @@
 //! # Ok(()) }
 //! ```
 
+mod push;
+
 use phi_core::tensor::Tensor;
 
 use crate::data::Trajectory;
-use crate::model::{Gns, GnsKernels, GraphBatch, ModelError, Walls};
+use crate::model::{Gns, GnsKernels, GraphBatch, ModelError, Obstacles, Walls};
 
 /// A model stepping a window forward on the device, its predictions fed back.
 ///
@@ -37,7 +39,10 @@ use crate::model::{Gns, GnsKernels, GraphBatch, ModelError, Walls};
 /// slides the window one frame on (the oldest frame dropped, the radius graph rebuilt per
 /// example). With [`Walls::Clamp`] in the model's configuration the predicted positions are
 /// first clamped into the closed box of the model's bounds (no gradient flows through a clamped
-/// coordinate). Gradients flow through the steps when the window or the parameters carry them.
+/// coordinate). With [`Obstacles::Push`] the particles that follow the model are then pushed
+/// out of the cells of the kinematic particles, on the host values the next graph is built from
+/// (no gradient flows through a pushed particle). Gradients flow through the steps when the
+/// window or the parameters carry them.
 #[derive(Debug)]
 pub struct Rollout<'m, B: GnsKernels> {
     model: &'m Gns<B>,
@@ -46,6 +51,8 @@ pub struct Rollout<'m, B: GnsKernels> {
     follows_model: Tensor<B>,
     /// `[1, dim]` lower and upper bounds the predictions are clamped into ([`Walls::Clamp`]).
     clamp: Option<(Tensor<B>, Tensor<B>)>,
+    /// With [`Obstacles::Push`]: what pushing needs.
+    push: Option<Push>,
     /// The positions of the last step, not yet slid into the window, and their host values
     /// once read.
     pending: Option<(Tensor<B>, Option<Vec<f32>>)>,
@@ -110,11 +117,32 @@ impl<'m, B: GnsKernels> Rollout<'m, B> {
                 ))
             }
         };
+        let push = match spec.config.obstacles {
+            Obstacles::Open => None,
+            Obstacles::Push { cell_size } => {
+                let [_, frames, dim] = window.positions().shape()[..] else {
+                    unreachable!("GraphBatch keeps a rank-3 window")
+                };
+                let previous = window
+                    .positions()
+                    .to_vec()
+                    .chunks(frames * dim)
+                    .flat_map(|particle| particle[(frames - 1) * dim..].to_vec())
+                    .collect();
+                Some(Push {
+                    cell: cell_size as f32,
+                    solid: spec.kinematic(window.types()),
+                    moves: mask.to_vec().iter().map(|m| *m != 0.0).collect(),
+                    previous,
+                })
+            }
+        };
         Ok(Rollout {
             model,
             window,
             follows_model: mask.reshape(&[n, 1])?,
             clamp,
+            push,
             pending: None,
         })
     }
@@ -167,8 +195,32 @@ impl<'m, B: GnsKernels> Rollout<'m, B> {
                 ),
             });
         }
-        let next = Tensor::select(&self.follows_model, &predicted, kinematic)?;
-        Ok(&self.pending.insert((next, None)).0)
+        let mut next = Tensor::select(&self.follows_model, &predicted, kinematic)?;
+        let mut host = None;
+        if let Some(push) = &mut self.push {
+            let mut values = next.to_vec();
+            let spec = self.model.spec();
+            let moved = push::push_out(
+                &mut values,
+                &push.previous,
+                &push.moves,
+                &push.solid,
+                spec.config.dim,
+                push.cell,
+                &spec.bounds,
+            );
+            if moved.iter().any(|m| *m) {
+                let shape = next.shape();
+                let device = next.device();
+                let keep: Vec<f32> = moved.iter().map(|m| f32::from(u8::from(!m))).collect();
+                let keep = Tensor::from_vec(keep, &[shape[0], 1], &device)?;
+                let pushed = Tensor::from_slice(&values, &shape, &device)?;
+                next = Tensor::select(&keep, &next, &pushed)?;
+            }
+            push.previous.clone_from(&values);
+            host = Some(values);
+        }
+        Ok(&self.pending.insert((next, host)).0)
     }
 
     /// The host values of the last step's positions (`[N, dim]` row-major), read once: the
@@ -191,6 +243,19 @@ impl<'m, B: GnsKernels> Rollout<'m, B> {
         }
         Ok(())
     }
+}
+
+/// What [`Obstacles::Push`] needs from step to step.
+#[derive(Debug)]
+struct Push {
+    /// The side of an obstacle particle's cell.
+    cell: f32,
+    /// Which particles are solid (the kinematic types).
+    solid: Vec<bool>,
+    /// Which particles are pushed (those that follow the model).
+    moves: Vec<bool>,
+    /// The positions of the frame before the next prediction, `[N, dim]`, as pushed.
+    previous: Vec<f32>,
 }
 
 /// One predicted frame of a [`TrajectoryRollout`].
