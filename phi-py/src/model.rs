@@ -6,7 +6,7 @@ use phi_core::Tensor;
 use phi_gns::data::{Trajectory, read_metadata};
 use phi_gns::model::{
     ConfigOverrides, Gns, GnsConfig, GnsKernels, GraphBatch, MODEL_FILE, ModelSpec, WEIGHTS_FILE,
-    Walls, load_model, save_model,
+    Obstacles, Walls, load_model, save_model,
 };
 use phi_gns::rollout::{Rollout, RolloutRange, TrajectoryRollout, input_window};
 use pyo3::prelude::*;
@@ -300,6 +300,61 @@ impl Model {
             Loaded::Ndarray(m) => Loaded::Ndarray(Box::new(m.with_walls(walls))),
             #[cfg(feature = "burn")]
             Loaded::Burn(m) => Loaded::Burn(Box::new(m.with_walls(walls))),
+        };
+        Ok(Model {
+            inner,
+            dir: self.dir.clone(),
+        })
+    }
+
+    /// What the model's rollouts do with liquid predicted inside an obstacle: ``"open"``
+    /// (predictions taken as they are) or ``"push"`` (pushed out of the obstacle particles'
+    /// cells, as FLIP pushes its particles out of obstacles).
+    #[getter]
+    fn obstacles(&self) -> &'static str {
+        match self.spec().config.obstacles {
+            Obstacles::Open => "open",
+            Obstacles::Push { .. } => "push",
+        }
+    }
+
+    /// The same model (the same weights, on the same backend) whose rollouts treat liquid
+    /// predicted inside an obstacle as ``obstacles`` says: ``"open"`` or ``"push"``, the
+    /// latter out of the squares (cubes) of side ``cell_size`` around the obstacle particles,
+    /// the dataset's ``position_scale``. The network is unchanged.
+    ///
+    /// Raises:
+    ///     ModelError: an unknown kind, ``"push"`` without a positive ``cell_size``.
+    #[pyo3(signature = (obstacles, cell_size = None))]
+    fn with_obstacles(&self, obstacles: &str, cell_size: Option<f64>) -> PyResult<Model> {
+        let obstacles = match (obstacles, cell_size) {
+            ("open", _) => Obstacles::Open,
+            ("push", Some(cell_size)) => Obstacles::Push { cell_size },
+            ("push", None) => {
+                return Err(Error::argument(
+                    Area::Model,
+                    "with_obstacles",
+                    "'push' needs the cell_size of the dataset's obstacle particles",
+                )
+                .into());
+            }
+            (other, _) => {
+                return Err(Error::argument(
+                    Area::Model,
+                    "with_obstacles",
+                    format!("'{other}' is not a kind of obstacles (use 'open' or 'push')"),
+                )
+                .into());
+            }
+        };
+        let inner = match &self.inner {
+            Loaded::Ndarray(m) => Loaded::Ndarray(Box::new(
+                m.with_obstacles(obstacles).map_err(Error::from)?,
+            )),
+            #[cfg(feature = "burn")]
+            Loaded::Burn(m) => {
+                Loaded::Burn(Box::new(m.with_obstacles(obstacles).map_err(Error::from)?))
+            }
         };
         Ok(Model {
             inner,

@@ -58,6 +58,28 @@ impl From<WallsArg> for phi_gns::model::Walls {
     }
 }
 
+/// `--obstacles`: what a rollout does with liquid predicted inside an obstacle
+/// ([`phi_gns::model::Obstacles`]), instead of what the model's `model.json` says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ObstaclesArg {
+    /// Predicted positions are taken as they are.
+    Open,
+    /// Liquid predicted inside the cell of an obstacle particle is pushed out to the nearest
+    /// free cell, as FLIP pushes its particles out of obstacles.
+    Push,
+}
+
+impl ObstaclesArg {
+    /// The rollout option for a dataset whose grid cells (and obstacle-particle spacing) are
+    /// `cell_size` stored units wide.
+    pub fn for_cells(self, cell_size: f64) -> phi_gns::model::Obstacles {
+        match self {
+            ObstaclesArg::Open => phi_gns::model::Obstacles::Open,
+            ObstaclesArg::Push => phi_gns::model::Obstacles::Push { cell_size },
+        }
+    }
+}
+
 /// Checks that `metadata` (read from `path`) fits the model of `spec` and returns the bounds the
 /// model should run with: `None` to keep its own. Without `choice`, a model with boundary
 /// features refuses other bounds, with a hint at `--bounds`.

@@ -32,11 +32,11 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
 use phi_gns::data::{Dataset, METADATA_FILE, Trajectory};
-use phi_gns::model::{Gns, GnsKernels, ModelError, Walls, load_model, read_spec};
+use phi_gns::model::{Gns, GnsKernels, ModelError, Obstacles, Walls, load_model, read_spec};
 use phi_gns::rollout::{RolloutRange, TrajectoryRollout, position_mse};
 use serde::{Deserialize, Serialize};
 
-use super::{BoundsFrom, WallsArg, bounds_for};
+use super::{BoundsFrom, ObstaclesArg, WallsArg, bounds_for};
 use crate::backends::BackendKind;
 use crate::dataset::render::DatasetRenderer;
 use crate::output::sink::{Every, FrameSink, FrameView};
@@ -152,6 +152,12 @@ pub struct RolloutArgs {
     /// open when model.json has none].
     #[arg(long, value_enum)]
     pub walls: Option<WallsArg>,
+    /// What the rollout does with liquid predicted inside an obstacle: `open` (predictions as
+    /// they are) or `push` (out of the obstacle particles' cells, those of the dataset's
+    /// `position_scale`, as FLIP pushes its particles out of obstacles) [default: the model's
+    /// `obstacles`, open when model.json has none].
+    #[arg(long, value_enum)]
+    pub obstacles: Option<ObstaclesArg>,
 }
 
 /// `rollout.json`: one trajectory's rollout.
@@ -168,6 +174,9 @@ pub(crate) struct RolloutRecord {
     /// What the rollout did at the domain's walls (absent: open).
     #[serde(default, skip_serializing_if = "Walls::is_open")]
     pub walls: Walls,
+    /// What the rollout did with liquid predicted inside obstacles (absent: open).
+    #[serde(default, skip_serializing_if = "Obstacles::is_open")]
+    pub obstacles: Obstacles,
     /// The dataset directory, as given.
     pub dataset: String,
     /// The split.
@@ -383,6 +392,10 @@ fn roll_all<B: GnsKernels>(
     if let Some(walls) = args.walls {
         model = model.with_walls(walls.into());
     }
+    if let Some(obstacles) = args.obstacles {
+        model =
+            model.with_obstacles(obstacles.for_cells(plan.dataset.metadata().position_scale))?;
+    }
     for previous in previous {
         previous.remove()?;
     }
@@ -415,6 +428,7 @@ fn roll_one<B: GnsKernels>(
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut record = RolloutRecord::start::<B>(args, index, &trajectory, &kinematic, c, range);
     record.walls = spec.config.walls;
+    record.obstacles = spec.config.obstacles;
     // The record first: it marks the folder as ours.
     write_record(dir, &record)?;
     let mut sinks = open_sinks(dir, plan, args, &trajectory, &mut record)?;
@@ -551,6 +565,7 @@ impl RolloutRecord {
             made_by: format!("phi rollout {}", env!("CARGO_PKG_VERSION")),
             model: args.model.display().to_string(),
             walls: Walls::Open,
+            obstacles: Obstacles::Open,
             dataset: args.data.display().to_string(),
             split: args.split.clone(),
             index,

@@ -298,6 +298,31 @@ fn eval_refuses_what_does_not_fit() {
     assert!(stderr.contains("NAME=DIR"), "{stderr}");
     let stderr = failed(eval(&m2s, &plane, &out, &["--trajectories", "2"]));
     assert!(stderr.contains("--trajectories 2"), "{stderr}");
+    // The per-model options name the flag and what is wrong.
+    let no_run = dir.display().to_string();
+    let no_run = format!("m2={no_run}");
+    for (extra, says) in [
+        (
+            &["--model-obstacles", "m2=bounce"][..],
+            "'bounce' is not one of its values",
+        ),
+        (
+            &["--model-obstacles", "other=push"][..],
+            "no --model is named 'other'",
+        ),
+        (
+            &["--model-walls", "m2=clamp", "--model-walls", "m2=open"][..],
+            "named twice",
+        ),
+        (&["--model-walls", "m2"][..], "expected NAME=VALUE"),
+        (&["--model-run", no_run.as_str()][..], "no train.csv there"),
+    ] {
+        let stderr = failed(eval(&m2s, &plane, &out, extra));
+        assert!(
+            stderr.contains(extra[0]) && stderr.contains(says),
+            "{extra:?}: {stderr}"
+        );
+    }
     let nothing = [dir.join("nothing").display().to_string()];
     let stderr = failed(eval(&nothing, &plane, &out, &[]));
     assert!(stderr.contains("model.json"), "{stderr}");

@@ -753,5 +753,29 @@ fn clamped_walls_keep_a_sinking_model_in_the_box() {
     let y = liquid_y(&clamped);
     assert!(y.iter().all(|&y| y >= 0.1), "below the floor: {y:?}");
     assert!(y.contains(&0.1f32), "nothing stopped on the floor: {y:?}");
+
+    // Pushed out of the obstacles too: the record names the dataset's cells.
+    let pushed = dir.join("pushed");
+    ok(rollout(
+        &model,
+        &data,
+        &pushed,
+        &[
+            "--frame-every",
+            "0",
+            "--walls",
+            "clamp",
+            "--obstacles",
+            "push",
+        ],
+    ));
+    let record = json(&pushed.join("test_0/rollout.json"));
+    let metadata = json(&data.join("metadata.json"));
+    assert_eq!(record["obstacles"]["kind"], "push", "{record}");
+    assert_eq!(
+        record["obstacles"]["cell_size"], metadata["position_scale"],
+        "{record}"
+    );
+    assert!(liquid_y(&pushed).iter().all(|&y| y >= 0.1));
     let _ = std::fs::remove_dir_all(dir);
 }

@@ -248,6 +248,14 @@ class Model:
         FLIP keeps its particles in the domain). The network is unchanged: with ``"clamp"``,
         ``predict`` is the open model's prediction clamped into the box."""
     @property
+    def obstacles(self) -> str:
+        """``"open"`` or ``"push"``: what the model's rollouts do with liquid predicted inside
+        an obstacle."""
+    def with_obstacles(self, obstacles: str, cell_size: Optional[float] = None) -> "Model":
+        """The same model whose rollouts push liquid predicted inside an obstacle particle's
+        cell (a square or cube of side ``cell_size``, the dataset's ``position_scale``) out to
+        the nearest free cell (``"push"``), or take it as it is (``"open"``)."""
+    @property
     def spec_dict(self) -> Dict[str, Any]:
         """The content of ``model.json``."""
     def predict(

@@ -40,8 +40,8 @@ use phi_gns::eval::{
     evaluate_trajectory_with, one_step_errors,
 };
 use phi_gns::model::{
-    Floor, Gns, GnsKernels, MODEL_FILE, ModelError, ModelSpec, WEIGHTS_FILE, Walls, load_model,
-    read_spec,
+    Floor, Gns, GnsKernels, MODEL_FILE, ModelError, ModelSpec, Obstacles, WEIGHTS_FILE, Walls,
+    load_model, read_spec,
 };
 use phi_gns::rollout::{RolloutRange, rollout};
 use rayon::prelude::*;
@@ -129,6 +129,17 @@ pub struct EvalArgs {
     /// ways under two names; NAME may be a floor of `--floors`. Repeat for several models.
     #[arg(long = "model-walls", value_name = "NAME=WALLS")]
     pub model_walls: Vec<String>,
+    /// `NAME=OBSTACLES`: roll the model named NAME out with `open` or `push` obstacles instead
+    /// of its model.json's (see `phi rollout --obstacles`; the cells pushed out of are those of
+    /// its dataset's `position_scale`); NAME may be a floor of `--floors`. Repeat for several
+    /// models.
+    #[arg(long = "model-obstacles", value_name = "NAME=OBSTACLES")]
+    pub model_obstacles: Vec<String>,
+    /// `NAME=RUN`: the `phi train` directory whose `train.csv` `screening.png` draws for the
+    /// model named NAME, for a model copied out of its run (a model in `RUN/best/` or
+    /// `RUN/checkpoints/step-…/` is found without it). Repeat for several models.
+    #[arg(long = "model-run", value_name = "NAME=RUN")]
+    pub model_run: Vec<String>,
     /// The split to evaluate on: train, valid, test, or another its metadata.json lists.
     #[arg(long, default_value = "test", value_name = "SPLIT", value_parser = crate::cli::parse_split)]
     pub split: String,
@@ -204,6 +215,8 @@ pub(crate) struct ModelEntry {
     pub bounds: Option<Vec<[f64; 2]>>,
     /// The walls of its rollouts when `--model-walls` replaces the model's.
     pub walls: Option<Walls>,
+    /// The obstacles of its rollouts when `--model-obstacles` replaces the model's.
+    pub obstacles: Option<Obstacles>,
     /// Which of [`Plan`]'s datasets it is evaluated on: 0 for `--data`, k for the k-th
     /// `--model-data`.
     pub data: usize,
@@ -220,11 +233,14 @@ impl ModelEntry {
     pub fn load<B: GnsKernels>(&self, device: &B::Device) -> Result<Gns<B>> {
         if let Some((floor, metadata)) = &self.floor {
             let c = self.spec.config.input_velocities;
-            let gns = floor.model::<B>(metadata, c, device)?;
-            return Ok(match self.walls {
-                Some(walls) => gns.with_walls(walls),
-                None => gns,
-            });
+            let mut gns = floor.model::<B>(metadata, c, device)?;
+            if let Some(walls) = self.walls {
+                gns = gns.with_walls(walls);
+            }
+            if let Some(obstacles) = self.obstacles {
+                gns = gns.with_obstacles(obstacles)?;
+            }
+            return Ok(gns);
         }
         let mut gns = load_model::<B>(&self.dir, device)?;
         if let Some(bounds) = &self.bounds {
@@ -232,6 +248,9 @@ impl ModelEntry {
         }
         if let Some(walls) = self.walls {
             gns = gns.with_walls(walls);
+        }
+        if let Some(obstacles) = self.obstacles {
+            gns = gns.with_obstacles(obstacles)?;
         }
         Ok(gns)
     }
@@ -388,6 +407,7 @@ pub(crate) fn resolve_model(arg: &str) -> Result<ModelEntry> {
         digest,
         bounds: None,
         walls: None,
+        obstacles: None,
         data: 0,
         floor: None,
     })
@@ -410,6 +430,7 @@ fn floor_entry(floor: Floor, metadata: &Metadata, input_velocities: usize) -> Re
         digest: format!("floor:{}:{:?}", floor.name(), floor.acceleration(metadata)),
         bounds: None,
         walls: None,
+        obstacles: None,
         data: 0,
         floor: Some((floor, Box::new(metadata.clone()))),
     })
@@ -512,7 +533,17 @@ fn resolve_models(
     datasets: &mut Vec<Dataset>,
     model_data: &[(String, PathBuf, Dataset)],
 ) -> Result<Vec<ModelEntry>> {
-    let model_walls = walls_overrides(args)?;
+    let model_walls = named_overrides("--model-walls", &args.model_walls, |w| match w {
+        "open" => Some(Walls::Open),
+        "clamp" => Some(Walls::Clamp),
+        _ => None,
+    })?;
+    let model_obstacles = named_overrides("--model-obstacles", &args.model_obstacles, |o| {
+        ["open", "push"].contains(&o).then_some(o == "push")
+    })?;
+    let model_runs = named_overrides("--model-run", &args.model_run, |run| {
+        Some(PathBuf::from(run))
+    })?;
     let mut models = Vec::with_capacity(args.models.len());
     for arg in &args.models {
         let mut entry = resolve_model(arg)?;
@@ -537,6 +568,17 @@ fn resolve_models(
         if let Some((_, walls)) = model_walls.iter().find(|(name, _)| *name == entry.label) {
             entry.walls = Some(*walls);
             entry.digest.push_str(&format!(":walls-{walls:?}"));
+        }
+        override_obstacles(&mut entry, &model_obstacles, data.metadata());
+        if let Some((_, run)) = model_runs.iter().find(|(name, _)| *name == entry.label) {
+            if !run.join("train.csv").is_file() {
+                bail!(
+                    "--model-run {}={}: no train.csv there (a phi train directory has one)",
+                    entry.label,
+                    run.display()
+                );
+            }
+            entry.run = Some(run.clone());
         }
         if let Some(other) = models.iter().find(|m: &&ModelEntry| m.label == entry.label) {
             bail!(
@@ -568,6 +610,7 @@ fn resolve_models(
                 entry.walls = Some(*walls);
                 entry.digest.push_str(&format!(":walls-{walls:?}"));
             }
+            override_obstacles(&mut entry, &model_obstacles, datasets[0].metadata());
             models.push(entry);
         }
     }
@@ -577,31 +620,62 @@ fn resolve_models(
     {
         bail!("--model-data {name}=…: no --model is named '{name}'");
     }
-    if let Some((name, _)) = model_walls
-        .iter()
-        .find(|(name, _)| !models.iter().any(|m| m.label == *name))
-    {
-        bail!("--model-walls {name}=…: no --model is named '{name}'");
+    for (flag, names) in [
+        (
+            "--model-walls",
+            model_walls.iter().map(|(n, _)| n).collect::<Vec<_>>(),
+        ),
+        (
+            "--model-obstacles",
+            model_obstacles.iter().map(|(n, _)| n).collect(),
+        ),
+        ("--model-run", model_runs.iter().map(|(n, _)| n).collect()),
+    ] {
+        if let Some(name) = names
+            .iter()
+            .find(|name| !models.iter().any(|m| m.label == ***name))
+        {
+            bail!("{flag} {name}=…: no --model is named '{name}'");
+        }
     }
     Ok(models)
 }
 
-/// The `--model-walls NAME=WALLS` pairs, each NAME a `--model`'s name, once.
-fn walls_overrides(args: &EvalArgs) -> Result<Vec<(String, Walls)>> {
-    let mut out: Vec<(String, Walls)> = Vec::with_capacity(args.model_walls.len());
-    for arg in &args.model_walls {
-        let Some((name, walls)) = arg.split_once('=') else {
-            bail!("--model-walls {arg}: expected NAME=WALLS, NAME a --model's name");
+/// `--model-obstacles` applied to `entry`: `push` pushes out of the cells of `metadata`'s
+/// `position_scale`, the spacing of the obstacle particles of the dataset it is evaluated on.
+fn override_obstacles(entry: &mut ModelEntry, overrides: &[(String, bool)], metadata: &Metadata) {
+    if let Some((_, push)) = overrides.iter().find(|(name, _)| *name == entry.label) {
+        let obstacles = if *push {
+            Obstacles::Push {
+                cell_size: metadata.position_scale,
+            }
+        } else {
+            Obstacles::Open
         };
-        let walls = match walls {
-            "open" => Walls::Open,
-            "clamp" => Walls::Clamp,
-            other => bail!("--model-walls {arg}: '{other}' is not 'open' or 'clamp'"),
+        entry.obstacles = Some(obstacles);
+        entry.digest.push_str(&format!(":obstacles-{obstacles:?}"));
+    }
+}
+
+/// The `FLAG NAME=VALUE` pairs of a per-model override, each NAME once, VALUE parsed by `parse`
+/// (`None`: not a value of FLAG).
+fn named_overrides<T>(
+    flag: &str,
+    args: &[String],
+    parse: impl Fn(&str) -> Option<T>,
+) -> Result<Vec<(String, T)>> {
+    let mut out: Vec<(String, T)> = Vec::with_capacity(args.len());
+    for arg in args {
+        let Some((name, value)) = arg.split_once('=') else {
+            bail!("{flag} {arg}: expected NAME=VALUE, NAME a --model's name");
+        };
+        let Some(value) = parse(value) else {
+            bail!("{flag} {arg}: '{value}' is not one of its values (see phi eval --help)");
         };
         if out.iter().any(|(n, _)| n == name) {
-            bail!("--model-walls {arg}: the model '{name}' has its walls already");
+            bail!("{flag} {arg}: the model '{name}' is named twice");
         }
-        out.push((name.to_string(), walls));
+        out.push((name.to_string(), value));
     }
     Ok(out)
 }
