@@ -267,6 +267,54 @@ def test_clamped_walls_keep_the_rollout_in_the_box(model_dir, dataset_dir):
         model.with_walls("bouncy")
 
 
+def test_pushed_obstacles_keep_the_liquid_out_of_cells_it_enters(model_dir, dataset_dir):
+    ds = phi_rs.Dataset(dataset_dir)
+    cell = ds.metadata["position_scale"]
+    lo, hi = np.array(ds.metadata["bounds"], dtype=np.float64).T
+    # A wall three cells thick in the middle of the domain, an obstacle particle at the centre of
+    # each of its cells, and a column of liquid left of it moving right at half a cell a frame.
+    first = int(0.5 * (hi[0] - lo[0]) / cell)
+    rows = int((hi[1] - lo[1]) / cell)
+    wall = np.array([[lo[0] + (i + 0.5) * cell, lo[1] + (j + 0.5) * cell]
+                     for i in range(first, first + 3) for j in range(4, rows - 4)])
+    column = np.array([[lo[0] + (first - 3.2) * cell, lo[1] + (j + 0.3) * cell]
+                       for j in range(8, 16)])
+    frames = 12
+    steps = np.arange(frames, dtype=np.float64)[:, None, None]
+    liquid = column[None] + steps * np.array([0.5 * cell, 0.0])
+    positions = np.concatenate([np.broadcast_to(wall, (frames,) + wall.shape), liquid],
+                               axis=1).astype(np.float32)
+    types = np.array([0] * len(wall) + [1] * len(column), dtype=np.int64)
+
+    model = phi_rs.Model.load(model_dir)
+    assert model.obstacles == "open"
+    pushed = model.with_obstacles("push", cell)
+    assert pushed.obstacles == "push" and model.obstacles == "open"
+    c = model.input_velocities
+    is_liquid, is_solid = types == 1, types == 0
+
+    def entered(rollout):
+        """Whether a liquid particle is, at some frame, inside an obstacle particle's cell it
+        was not inside at the frame before."""
+        f = np.concatenate([positions[c:c + 1], rollout])
+        d = np.abs(f[:, is_liquid, None, :] - f[:, None, is_solid, :])
+        inside = (d < np.float32(0.5 * cell)).all(axis=-1)
+        return (inside[1:] & ~inside[:-1]).any()
+
+    open_rollout = model.rollout(positions, types)
+    pushed_rollout = pushed.rollout(positions, types)
+    assert entered(open_rollout)
+    assert not entered(pushed_rollout)
+    # The obstacle particles follow the truth either way.
+    assert np.array_equal(pushed_rollout[:, is_solid], positions[c + 1:, is_solid])
+    with pytest.raises(phi_rs.ModelError, match="needs the cell_size"):
+        model.with_obstacles("push")
+    with pytest.raises(phi_rs.ModelError, match="'bounce' is not a kind of obstacles"):
+        model.with_obstacles("bounce", cell)
+    with pytest.raises(phi_rs.ModelError, match="cell_size"):
+        model.with_obstacles("push", 0.0)
+
+
 def test_evaluate_with_a_container_counts_what_leaves_it(model_dir, dataset_dir):
     ds = phi_rs.Dataset(dataset_dir)
     bounds, cell = ds.metadata["bounds"], ds.metadata["position_scale"]
