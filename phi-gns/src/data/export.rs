@@ -3,7 +3,7 @@
 //! - [`export_gns`]: geoelements/gns (PyTorch). One `{split}.npz` per split whose entries
 //!   `trajectory_{i}` are object arrays `(positions [T, N, D] f32, particle_type [N] i64)`, the
 //!   items gns's `data_loader.load_npz_data` iterates over, and a `metadata.json` with the keys
-//!   its training code reads ([`GnsMetadata`]). Types: [`GNS_KINEMATIC`] (3) for obstacle and
+//!   its training code reads (`GnsMetadata`). Types: [`GNS_KINEMATIC`] (3) for obstacle and
 //!   wall particles (gns moves them along the ground truth, as static), [`GNS_WATER`] (5) for
 //!   liquid.
 //! - [`lagrangebench_metadata`] and [`export_lagrangebench_arrays`]: the parts of a
@@ -112,7 +112,7 @@ fn write_json(path: &Path, json: &impl Serialize) -> Result<(), DataError> {
 /// the entry `trajectory_{i}`, an object array `[positions, particle_type]`. Streamed (one
 /// trajectory in memory), written atomically; `on_trajectory` is called after each one.
 /// Returns the number of trajectories.
-pub fn export_gns_split(
+pub(crate) fn export_gns_split(
     dataset: &Dataset,
     split: &str,
     out_file: &Path,
@@ -131,7 +131,7 @@ pub fn export_gns_split(
 }
 
 /// Writes every split of `dataset` for gns into `out_dir` (`{split}.npz`, see
-/// [`export_gns_split`]) and then `out_dir/metadata.json` ([`GnsMetadata`]). Returns the
+/// `export_gns_split`) and then `out_dir/metadata.json` (`GnsMetadata`). Returns the
 /// trajectories written per split.
 pub fn export_gns(
     dataset: &Dataset,

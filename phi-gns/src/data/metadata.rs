@@ -12,7 +12,7 @@ pub const METADATA_FILE: &str = "metadata.json";
 /// The value of [`Metadata::format`].
 pub const FORMAT: &str = "phi-dataset";
 /// The value of [`Metadata::format_version`] this code reads and writes.
-pub const FORMAT_VERSION: u32 = 1;
+pub(crate) const FORMAT_VERSION: u32 = 1;
 
 /// How the domain boundary appears in a dataset (thesis section 5.3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -53,7 +53,7 @@ pub struct Metadata {
     pub acc_std: Vec<f64>,
     /// Always [`FORMAT`] (`"phi-dataset"`).
     pub format: String,
-    /// Always [`FORMAT_VERSION`].
+    /// Always `FORMAT_VERSION`.
     pub format_version: u32,
     /// The number of trajectories in each split, e.g. `{"train": 2000, "valid": 20}`.
     pub splits: BTreeMap<String, usize>,

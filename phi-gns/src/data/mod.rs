@@ -81,9 +81,7 @@ mod trajectory;
 use std::path::PathBuf;
 
 pub use dataset::{Dataset, SplitReader, export_npz};
-pub use metadata::{
-    FORMAT, FORMAT_VERSION, METADATA_FILE, Metadata, Variant, read_metadata, write_metadata,
-};
+pub use metadata::{FORMAT, METADATA_FILE, Metadata, Variant, read_metadata, write_metadata};
 pub use phi_io::IoError;
 pub use stats::{Moments, TrajectoryStats};
 pub use trajectory::{

@@ -558,7 +558,7 @@ pub(crate) fn decode_record(
 // Export and import
 
 /// The TFRecord file of `split` in `dir`: `dir/{split}.tfrecord`.
-pub fn tfrecord_path(dir: &Path, split: &str) -> PathBuf {
+pub(crate) fn tfrecord_path(dir: &Path, split: &str) -> PathBuf {
     dir.join(format!("{split}.tfrecord"))
 }
 

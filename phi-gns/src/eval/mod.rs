@@ -34,7 +34,7 @@ mod trajectory;
 pub use probe::{ProbeResult, ProbeScene, probe, probe_scene};
 pub use summary::{Band, ModelSummary, PlausibilitySummary};
 pub use trajectory::{
-    Curves, EmdCost, EvalOptions, LATE_FRAMES, OneStepErrors, Plausibility, TrajectoryEvaluation,
+    Curves, EmdCost, EvalOptions, OneStepErrors, Plausibility, TrajectoryEvaluation,
     evaluate_trajectory, evaluate_trajectory_with, mse_acc1, mse_acc1_in, one_step_errors,
 };
 

@@ -116,7 +116,7 @@ pub struct Plausibility {
     /// Mean neighbour count of the prediction over the truth's at the last frame.
     pub final_density_ratio: f64,
     /// Kinetic energy of the prediction over the truth's, summed over the last
-    /// [`LATE_FRAMES`] frames.
+    /// `LATE_FRAMES` frames.
     pub late_kinetic_energy_ratio: f64,
     /// The distance between the predicted and the true liquid's centres of mass at the last
     /// frame, in cells.
@@ -124,7 +124,7 @@ pub struct Plausibility {
 }
 
 /// The frames at the end of a rollout whose kinetic energy [`Plausibility`] compares.
-pub const LATE_FRAMES: usize = 50;
+pub(crate) const LATE_FRAMES: usize = 50;
 
 impl Plausibility {
     /// Whether every figure is within the bounds of a usable simulator: at most 1 % of the

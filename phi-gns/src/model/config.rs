@@ -10,9 +10,9 @@ use super::ModelError;
 use crate::data::{Metadata, OBSTACLE, Variant};
 
 /// The value of [`ModelSpec::format`].
-pub const MODEL_FORMAT: &str = "phi-gns-model";
+pub(crate) const MODEL_FORMAT: &str = "phi-gns-model";
 /// The value of [`ModelSpec::format_version`] this code reads and writes.
-pub const MODEL_FORMAT_VERSION: u32 = 1;
+pub(crate) const MODEL_FORMAT_VERSION: u32 = 1;
 
 /// The sizes and options of a GNS (Sanchez-Gonzalez et al. 2020; thesis section 5.1). Every key
 /// but `walls` and `obstacles` is required in `model.json`; unknown keys are errors.
@@ -322,9 +322,9 @@ impl Normalisation {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ModelSpec {
-    /// Always [`MODEL_FORMAT`].
+    /// Always `MODEL_FORMAT`.
     pub format: String,
-    /// Always [`MODEL_FORMAT_VERSION`].
+    /// Always `MODEL_FORMAT_VERSION`.
     pub format_version: u32,
     /// Sizes and options.
     pub config: GnsConfig,

@@ -15,7 +15,7 @@ use super::{GraphBatch, ModelError, Parameters};
 
 /// The per-component constants of the pre- and postprocessor, each a `[dim]` tensor.
 #[derive(Debug, Clone)]
-pub struct Normalisers<B: Backend> {
+pub(crate) struct Normalisers<B: Backend> {
     /// The mean velocity.
     pub vel_mean: Tensor<B>,
     /// `sqrt(vel_std² + σ²)`.

@@ -3,9 +3,9 @@
 //!
 //! - [`config`]: sizes and options ([`GnsConfig`]) and `model.json` ([`ModelSpec`]);
 //! - [`params`]: the named parameters, their PyTorch-style layout and seeded initial values;
-//! - [`features`]: node and edge features from a window of positions, and the integration of
+//! - `features`: node and edge features from a window of positions, and the integration of
 //!   the predicted acceleration;
-//! - [`network`]: encode-process-decode with unshared interaction networks;
+//! - `network`: encode-process-decode with unshared interaction networks;
 //! - [`kernels`]: the fused kernels the network calls ([`GnsKernels`]);
 //! - [`files`]: model directories (`model.safetensors` and `model.json`).
 //!
@@ -37,11 +37,11 @@
 
 mod batch;
 pub mod config;
-pub mod features;
+pub(crate) mod features;
 pub mod files;
 pub mod floor;
 pub mod kernels;
-pub mod network;
+pub(crate) mod network;
 pub mod params;
 
 use std::path::{Path, PathBuf};
@@ -51,11 +51,8 @@ use phi_core::tensor::Tensor;
 
 use crate::graph::GraphError;
 pub use batch::GraphBatch;
-pub use config::{
-    ConfigOverrides, GnsConfig, MODEL_FORMAT, MODEL_FORMAT_VERSION, ModelSpec, Normalisation,
-    Obstacles, Walls,
-};
-pub use features::Normalisers;
+pub use config::{ConfigOverrides, GnsConfig, ModelSpec, Normalisation, Obstacles, Walls};
+use features::Normalisers;
 pub use files::{MODEL_FILE, WEIGHTS_FILE, load_model, read_spec, save_model};
 pub use floor::Floor;
 pub use kernels::GnsKernels;

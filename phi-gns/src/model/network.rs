@@ -7,8 +7,6 @@ use phi_core::tensor::{IntTensor, Tensor};
 use super::kernels::{Dense, EdgeInput, Norm};
 use super::{GnsKernels, ModelError, Parameters};
 
-pub use super::kernels::LAYER_NORM_EPS;
-
 /// The dense layers `{prefix}.{i}` for `i` in `layers`.
 fn dense_layers<B: GnsKernels>(
     params: &Parameters<B>,

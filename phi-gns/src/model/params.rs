@@ -168,7 +168,7 @@ impl<B: Backend> Parameters<B> {
     ///
     /// # Panics
     /// If there is none: names come from [`parameter_layout`], which [`Parameters::init`] and
-    /// [`Parameters::from_tensors`] guarantee are all present.
+    /// `Parameters::from_tensors` guarantee are all present.
     pub fn get(&self, name: &str) -> &Tensor<B> {
         self.tensors
             .get(name)

@@ -74,11 +74,6 @@ impl WeightAverage {
     pub fn updates(&self) -> u64 {
         self.updates
     }
-
-    /// `d`, the decay it tends to.
-    pub fn decay(&self) -> f64 {
-        self.decay
-    }
 }
 
 #[cfg(test)]

@@ -19,8 +19,9 @@ use std::path::{Path, PathBuf};
 use phi_core::backend::Host;
 use serde::{Deserialize, Serialize};
 
+use super::average::WeightAverage;
 use super::config::SelectBy;
-use super::{Adam, AdamConfig, TrainError, WeightAverage};
+use super::{Adam, AdamConfig, TrainError};
 use crate::model::files::{tensors_to_bytes, weights_from_bytes};
 use crate::model::{Gns, GnsKernels, Parameters, load_model, save_model};
 

@@ -105,7 +105,7 @@ pub struct TrainingSection {
     /// the last) with probability ½, which maps a scene to a scene (default off).
     #[serde(default, skip_serializing_if = "is_false")]
     pub mirror: bool,
-    /// `d` of a moving average of the weights ([`super::WeightAverage`], e.g. 0.999): when
+    /// `d` of a moving average of the weights (`WeightAverage`, e.g. 0.999): when
     /// set, screening, `best/` and each checkpoint's `average/` hold the averaged weights,
     /// while training goes on from the weights of the last step (absent: no average). The
     /// one key besides `steps` that `--resume` lets change: an average switched on then

@@ -10,7 +10,7 @@
 //! - [`pushforward`]: LagrangeBench's pushforward training, a one-step loss after unrolled
 //!   steps without gradient, and its schedule.
 //!
-//! - [`average`]: a moving average of the weights over the steps, screened and kept instead
+//! - `average`: a moving average of the weights over the steps, screened and kept instead
 //!   of the weights of one step.
 //!
 //! [`step`] is one training step read top to bottom (`take_step`: windows, mirroring, noise,
@@ -20,7 +20,7 @@
 //! ([`screening`]) and files, is [`run::TrainingRun`]; `phi train` drives it.
 
 pub mod adam;
-pub mod average;
+pub(crate) mod average;
 pub(crate) mod cache;
 pub(crate) mod checkpoint;
 pub mod config;
@@ -38,7 +38,6 @@ pub mod step;
 pub(crate) mod stream;
 
 pub use adam::{Adam, AdamConfig, LearningRate};
-pub use average::WeightAverage;
 pub use checkpoint::BEST_DIR;
 pub use config::TrainConfig;
 pub use error::TrainError;

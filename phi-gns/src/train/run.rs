@@ -13,11 +13,11 @@
 //! - `checkpoints/step-…/`: the newest `checkpoints.keep` checkpoints (`checkpoint.rs`);
 //! - `best/`: the model with the best screening metric so far (the metric may change on
 //!   `--resume`; the next screening then replaces it).
-//! - `train.lock` ([`LOCK_FILE`]): the process id of the run while it is open, so that a
+//! - `train.lock` (`LOCK_FILE`): the process id of the run while it is open, so that a
 //!   second run on the directory is refused; a killed run's lock is taken over.
 //!
 //! With `training.ema_decay`, the run keeps a moving average of its weights
-//! ([`super::WeightAverage`]): screening reads the average, `best/` holds it, and each
+//! (`WeightAverage`): screening reads the average, `best/` holds it, and each
 //! checkpoint holds it as `average/` beside the weights training continues from.
 //!
 //! Each step `s` draws its windows, its noise and its pushforward unroll from generators that
@@ -35,6 +35,7 @@ use phi_core::backend::Host;
 use phi_io::output_dir::{Marker, OutputDir, OutputSubdir, Outputs};
 use serde::{Deserialize, Serialize};
 
+use super::average::WeightAverage;
 use super::checkpoint::{
     BEST_DIR, Best, CHECKPOINTS_DIR, CheckpointState, LossAccumulator, checkpoints, load_average,
     load_checkpoint, prune_checkpoints, save_best, save_checkpoint,
@@ -44,7 +45,7 @@ use super::sampler::WindowSpec;
 use super::screening::{Screening, ScreeningPlan, screen};
 use super::step::take_step;
 use super::stream::{BatchConfig, BatchSource, BatchStream};
-use super::{Adam, TrainError, WeightAverage};
+use super::{Adam, TrainError};
 use crate::data::{Dataset, METADATA_FILE, Trajectory};
 use crate::model::{Gns, GnsKernels, ModelError, load_model};
 
@@ -53,7 +54,7 @@ pub const MADE_BY: &str = "phi train";
 /// The run's description file.
 pub(crate) const TRAIN_FILE: &str = "train.json";
 /// The configuration as run.
-pub const CONFIG_FILE: &str = "config.toml";
+pub(crate) const CONFIG_FILE: &str = "config.toml";
 /// The loss and screening log.
 pub(crate) const LOG_FILE: &str = "train.csv";
 /// The header of [`LOG_FILE`].
@@ -66,7 +67,7 @@ const LOG_HEADER_BEFORE_EMD: &str =
 /// `train.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct TrainRecord {
+pub(crate) struct TrainRecord {
     /// Always [`MADE_BY`].
     pub made_by: String,
     /// The dataset directory.
@@ -259,11 +260,6 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
         &self.config
     }
 
-    /// The moving average of the weights, if the run keeps one.
-    pub fn average(&self) -> Option<&WeightAverage> {
-        self.average.as_ref()
-    }
-
     /// The best screening result so far.
     pub fn best(&self) -> Option<Best> {
         self.state.best
@@ -336,7 +332,7 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
     /// best so far.
     ///
     /// # Errors
-    /// As [`screen`]; file errors writing `best/`.
+    /// As `screen`; file errors writing `best/`.
     pub fn screen(&mut self) -> Result<Screening, TrainError> {
         let weights = match &self.average {
             Some(average) => average.params().clone(),

@@ -47,7 +47,7 @@ pub struct Screening {
 /// `rollout_steps` steps (capped at each trajectory's length) and, for `emd_every > 0`, the EMD
 /// of every `emd_every`-th predicted frame of them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ScreeningPlan {
+pub(crate) struct ScreeningPlan {
     /// One-step windows every this many frames.
     pub window_stride: usize,
     /// Steps of each rollout.
@@ -62,7 +62,7 @@ pub struct ScreeningPlan {
 /// [`ModelError::Input`] for no trajectories, a trajectory too short for one window, or one
 /// with only kinematic particles. A rollout that blows up (a non-finite position) makes the
 /// rollout MSE and EMD infinite.
-pub fn screen<B: GnsKernels>(
+pub(crate) fn screen<B: GnsKernels>(
     model: &Gns<B>,
     trajectories: &[Trajectory],
     plan: ScreeningPlan,

@@ -2,12 +2,12 @@
 //! recipe): the drawn windows of a batch, mirrored and made noisy; the targets; the radius
 //! graph; the loss of the variant (one-step, multi-step or pushforward); its gradients; Adam.
 //!
-//! [`take_step`] is the step [`super::run::TrainingRun`] takes; [`train_step`] and
+//! `take_step` is the step [`super::run::TrainingRun`] takes; [`train_step`] and
 //! [`train_step_with`] are its last half (loss → gradients → Adam) for callers with a loss of
 //! their own.
 //!
 //! Every random draw of step `s` comes from a generator keyed by `(training.seed, s)` and a
-//! purpose ([`super::rng`]), so the step is a function of the run's state and `s` alone.
+//! purpose (`train::rng`), so the step is a function of the run's state and `s` alone.
 
 use phi_core::AutodiffBackend;
 use phi_core::tensor::Tensor;

@@ -73,7 +73,7 @@ pub struct HostBatch {
 /// How batches are drawn: the seed, the number of windows per step and their span.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BatchConfig {
-    /// The seed of the sampling generator ([`crate::train::rng::step_rng`]).
+    /// The seed of the sampling generator (`train::rng::step_rng`).
     pub seed: u64,
     /// Windows per step (DeepMind's default: 2).
     pub batch_size: usize,
@@ -84,7 +84,7 @@ pub struct BatchConfig {
 }
 
 impl BatchConfig {
-    /// A configuration with the [default cache capacity](DEFAULT_CACHE_BYTES).
+    /// A configuration with the default cache capacity (`DEFAULT_CACHE_BYTES`).
     pub fn new(seed: u64, batch_size: usize, window: WindowSpec) -> Self {
         BatchConfig {
             seed,
@@ -96,7 +96,7 @@ impl BatchConfig {
 }
 
 /// Builds the batch of any step of one split (the synchronous path); see the
-/// [module documentation](self).
+/// module documentation of `train::stream`.
 #[derive(Debug, Clone)]
 pub struct BatchSource {
     sampler: WindowSampler,
@@ -109,7 +109,7 @@ impl BatchSource {
     /// The batches of `split` of `dataset` drawn as `config` says.
     ///
     /// # Errors
-    /// [`DataError::UnknownSplit`]; as [`WindowSampler::new`] when no trajectory is as long as
+    /// [`DataError::UnknownSplit`]; as `WindowSampler::new` when no trajectory is as long as
     /// a window.
     pub fn new(dataset: &Dataset, split: &str, config: &BatchConfig) -> Result<Self, DataError> {
         Ok(BatchSource {
@@ -123,7 +123,7 @@ impl BatchSource {
     /// The batch of step `step`.
     ///
     /// # Errors
-    /// As [`TrajectoryCache::get`]: a trajectory file of the batch is missing or damaged (the
+    /// As `TrajectoryCache::get`: a trajectory file of the batch is missing or damaged (the
     /// error names it).
     pub fn batch(&mut self, step: u64) -> Result<HostBatch, DataError> {
         self.batch_unless(step, &AtomicBool::new(false))
