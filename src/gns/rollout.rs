@@ -442,15 +442,7 @@ fn roll_one<B: GnsKernels>(
             let frame = match frame {
                 Ok(frame) => frame,
                 Err(e) => {
-                    let step = record.steps + 1;
-                    record.failed_step = Some(step);
-                    record.reason = Some(match e {
-                        ModelError::NonFinitePrediction { .. } => e.to_string(),
-                        other => format!(
-                            "rollout step {step} (frame {}): {other}",
-                            range.start + step
-                        ),
-                    });
+                    record.fail(e, range.start);
                     return Ok(());
                 }
             };
@@ -549,6 +541,17 @@ fn open_sinks(
 }
 
 impl RolloutRecord {
+    /// Records that the prediction after the last step reached failed with `e`; `start` is the
+    /// frame the rollout started from.
+    fn fail(&mut self, e: ModelError, start: usize) {
+        let step = self.steps + 1;
+        self.failed_step = Some(step);
+        self.reason = Some(match e {
+            ModelError::NonFinitePrediction { .. } => e.to_string(),
+            other => format!("rollout step {step} (frame {}): {other}", start + step),
+        });
+    }
+
     /// The record of a rollout that is starting: nothing predicted yet, `"complete": false`.
     fn start<B: GnsKernels>(
         args: &RolloutArgs,

@@ -533,18 +533,8 @@ fn resolve_models(
     datasets: &mut Vec<Dataset>,
     model_data: &[(String, PathBuf, Dataset)],
 ) -> Result<Vec<ModelEntry>> {
-    let model_walls = named_overrides("--model-walls", &args.model_walls, |w| match w {
-        "open" => Some(Walls::Open),
-        "clamp" => Some(Walls::Clamp),
-        _ => None,
-    })?;
-    let model_obstacles = named_overrides("--model-obstacles", &args.model_obstacles, |o| {
-        ["open", "push"].contains(&o).then_some(o == "push")
-    })?;
-    let model_runs = named_overrides("--model-run", &args.model_run, |run| {
-        Some(PathBuf::from(run))
-    })?;
-    let mut models = Vec::with_capacity(args.models.len());
+    let overrides = ModelOverrides::parse(args)?;
+    let mut models: Vec<ModelEntry> = Vec::with_capacity(args.models.len());
     for arg in &args.models {
         let mut entry = resolve_model(arg)?;
         if let Some((_, dir, other)) = model_data.iter().find(|(name, ..)| *name == entry.label) {
@@ -565,22 +555,9 @@ fn resolve_models(
         if let Some(bounds) = &entry.bounds {
             entry.digest.push_str(&format!(":bounds{bounds:?}"));
         }
-        if let Some((_, walls)) = model_walls.iter().find(|(name, _)| *name == entry.label) {
-            entry.walls = Some(*walls);
-            entry.digest.push_str(&format!(":walls-{walls:?}"));
-        }
-        override_obstacles(&mut entry, &model_obstacles, data.metadata());
-        if let Some((_, run)) = model_runs.iter().find(|(name, _)| *name == entry.label) {
-            if !run.join("train.csv").is_file() {
-                bail!(
-                    "--model-run {}={}: no train.csv there (a phi train directory has one)",
-                    entry.label,
-                    run.display()
-                );
-            }
-            entry.run = Some(run.clone());
-        }
-        if let Some(other) = models.iter().find(|m: &&ModelEntry| m.label == entry.label) {
+        overrides.apply(&mut entry, data.metadata());
+        overrides.apply_run(&mut entry)?;
+        if let Some(other) = models.iter().find(|m| m.label == entry.label) {
             bail!(
                 "--model {arg}: the name '{}' is taken by {}; name them: --model NAME=DIR",
                 entry.label,
@@ -606,11 +583,7 @@ fn resolve_models(
                 );
             }
             let mut entry = floor_entry(floor, datasets[0].metadata(), c)?;
-            if let Some((_, walls)) = model_walls.iter().find(|(name, _)| *name == entry.label) {
-                entry.walls = Some(*walls);
-                entry.digest.push_str(&format!(":walls-{walls:?}"));
-            }
-            override_obstacles(&mut entry, &model_obstacles, datasets[0].metadata());
+            overrides.apply(&mut entry, datasets[0].metadata());
             models.push(entry);
         }
     }
@@ -620,25 +593,80 @@ fn resolve_models(
     {
         bail!("--model-data {name}=…: no --model is named '{name}'");
     }
-    for (flag, names) in [
-        (
-            "--model-walls",
-            model_walls.iter().map(|(n, _)| n).collect::<Vec<_>>(),
-        ),
-        (
-            "--model-obstacles",
-            model_obstacles.iter().map(|(n, _)| n).collect(),
-        ),
-        ("--model-run", model_runs.iter().map(|(n, _)| n).collect()),
-    ] {
-        if let Some(name) = names
-            .iter()
-            .find(|name| !models.iter().any(|m| m.label == ***name))
-        {
-            bail!("{flag} {name}=…: no --model is named '{name}'");
-        }
-    }
+    overrides.check_names(&models)?;
     Ok(models)
+}
+
+/// The per-model overrides of `phi eval`: `--model-walls`, `--model-obstacles` and
+/// `--model-run`, each a list of `NAME=VALUE`.
+struct ModelOverrides {
+    walls: Vec<(String, Walls)>,
+    /// `true` for `push`.
+    obstacles: Vec<(String, bool)>,
+    runs: Vec<(String, PathBuf)>,
+}
+
+impl ModelOverrides {
+    fn parse(args: &EvalArgs) -> Result<Self> {
+        Ok(ModelOverrides {
+            walls: named_overrides("--model-walls", &args.model_walls, |w| match w {
+                "open" => Some(Walls::Open),
+                "clamp" => Some(Walls::Clamp),
+                _ => None,
+            })?,
+            obstacles: named_overrides("--model-obstacles", &args.model_obstacles, |o| {
+                ["open", "push"].contains(&o).then_some(o == "push")
+            })?,
+            runs: named_overrides("--model-run", &args.model_run, |run| {
+                Some(PathBuf::from(run))
+            })?,
+        })
+    }
+
+    /// The walls and obstacles named for `entry`, evaluated on a dataset of `metadata`.
+    fn apply(&self, entry: &mut ModelEntry, metadata: &Metadata) {
+        if let Some((_, walls)) = self.walls.iter().find(|(name, _)| *name == entry.label) {
+            entry.walls = Some(*walls);
+            entry.digest.push_str(&format!(":walls-{walls:?}"));
+        }
+        override_obstacles(entry, &self.obstacles, metadata);
+    }
+
+    /// The training run named for `entry` (`--model-run`), which must hold a `train.csv`.
+    fn apply_run(&self, entry: &mut ModelEntry) -> Result<()> {
+        if let Some((_, run)) = self.runs.iter().find(|(name, _)| *name == entry.label) {
+            if !run.join("train.csv").is_file() {
+                bail!(
+                    "--model-run {}={}: no train.csv there (a phi train directory has one)",
+                    entry.label,
+                    run.display()
+                );
+            }
+            entry.run = Some(run.clone());
+        }
+        Ok(())
+    }
+
+    /// Every name an override gives is a model's.
+    fn check_names(&self, models: &[ModelEntry]) -> Result<()> {
+        let given: [(&str, Vec<&String>); 3] = [
+            ("--model-walls", self.walls.iter().map(|(n, _)| n).collect()),
+            (
+                "--model-obstacles",
+                self.obstacles.iter().map(|(n, _)| n).collect(),
+            ),
+            ("--model-run", self.runs.iter().map(|(n, _)| n).collect()),
+        ];
+        for (flag, names) in given {
+            if let Some(name) = names
+                .iter()
+                .find(|name| !models.iter().any(|m| m.label == ***name))
+            {
+                bail!("{flag} {name}=…: no --model is named '{name}'");
+            }
+        }
+        Ok(())
+    }
 }
 
 /// `--model-obstacles` applied to `entry`: `push` pushes out of the cells of `metadata`'s
