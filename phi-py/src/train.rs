@@ -69,46 +69,11 @@ pub fn train<'py>(
     ema_decay: Option<f64>,
     progress: Option<Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    if resume && init_from.is_some() {
-        return Err(Error::argument(
-            Area::Training,
-            "train: init_from",
-            "a resumed run continues from its checkpoint; init_from is for a new run",
-        )
-        .into());
-    }
+    let source = run_source(resume, config, data, init_from)?;
     let select_by = select_by
         .map(|name| name.parse::<SelectBy>())
         .transpose()
         .map_err(|reason| Error::argument(Area::Training, "train: select_by", &reason))?;
-    let source = if resume {
-        RunSource::Resume {
-            preset: config,
-            data,
-        }
-    } else {
-        let Some(preset) = config else {
-            return Err(Error::argument(
-                Area::Training,
-                "train: config",
-                "a preset is needed for a new run (e.g. configs/gns/cpu/1sn.toml)",
-            )
-            .into());
-        };
-        let Some(data) = data else {
-            return Err(Error::argument(
-                Area::Training,
-                "train: data",
-                "a dataset is needed for a new run",
-            )
-            .into());
-        };
-        RunSource::New {
-            preset,
-            data,
-            init_from,
-        }
-    };
     let overrides = Overrides {
         steps,
         batch_size,
@@ -146,6 +111,62 @@ pub fn train<'py>(
             return Err(error);
         }
     }
+    summary(py, &run, loss, out)
+}
+
+/// Where a run comes from: the run in `out` resumed (with its own preset and dataset unless
+/// given), or a new one from a preset and a dataset.
+fn run_source(
+    resume: bool,
+    config: Option<PathBuf>,
+    data: Option<PathBuf>,
+    init_from: Option<PathBuf>,
+) -> PyResult<RunSource> {
+    if resume {
+        if init_from.is_some() {
+            return Err(Error::argument(
+                Area::Training,
+                "train: init_from",
+                "a resumed run continues from its checkpoint; init_from is for a new run",
+            )
+            .into());
+        }
+        return Ok(RunSource::Resume {
+            preset: config,
+            data,
+        });
+    }
+    let Some(preset) = config else {
+        return Err(Error::argument(
+            Area::Training,
+            "train: config",
+            "a preset is needed for a new run (e.g. configs/gns/cpu/1sn.toml)",
+        )
+        .into());
+    };
+    let Some(data) = data else {
+        return Err(Error::argument(
+            Area::Training,
+            "train: data",
+            "a dataset is needed for a new run",
+        )
+        .into());
+    };
+    Ok(RunSource::New {
+        preset,
+        data,
+        init_from,
+    })
+}
+
+/// The dictionary `train` returns: the step reached, the last loss, the best screening and
+/// the run's folder.
+fn summary<'py>(
+    py: Python<'py>,
+    run: &TrainingRun<Autodiff>,
+    loss: Option<f32>,
+    out: PathBuf,
+) -> PyResult<Bound<'py, PyDict>> {
     let result = PyDict::new(py);
     result.set_item("step", run.step())?;
     result.set_item("loss", loss)?;
