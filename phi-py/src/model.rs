@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use phi_core::Tensor;
 use phi_gns::data::{Trajectory, read_metadata};
 use phi_gns::model::{
-    ConfigOverrides, Gns, GnsConfig, GnsKernels, GraphBatch, MODEL_FILE, ModelSpec, WEIGHTS_FILE,
-    Obstacles, Walls, load_model, save_model,
+    ConfigOverrides, Gns, GnsConfig, GnsKernels, GraphBatch, MODEL_FILE, ModelSpec, Obstacles,
+    WEIGHTS_FILE, Walls, load_model, save_model,
 };
 use phi_gns::rollout::{Rollout, RolloutRange, TrajectoryRollout, input_window};
 use pyo3::prelude::*;
@@ -348,9 +348,9 @@ impl Model {
             }
         };
         let inner = match &self.inner {
-            Loaded::Ndarray(m) => Loaded::Ndarray(Box::new(
-                m.with_obstacles(obstacles).map_err(Error::from)?,
-            )),
+            Loaded::Ndarray(m) => {
+                Loaded::Ndarray(Box::new(m.with_obstacles(obstacles).map_err(Error::from)?))
+            }
             #[cfg(feature = "burn")]
             Loaded::Burn(m) => {
                 Loaded::Burn(Box::new(m.with_obstacles(obstacles).map_err(Error::from)?))

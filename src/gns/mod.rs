@@ -72,7 +72,7 @@ pub enum ObstaclesArg {
 impl ObstaclesArg {
     /// The rollout option for a dataset whose grid cells (and obstacle-particle spacing) are
     /// `cell_size` stored units wide.
-    pub fn for_cells(self, cell_size: f64) -> phi_gns::model::Obstacles {
+    pub(crate) fn for_cells(self, cell_size: f64) -> phi_gns::model::Obstacles {
         match self {
             ObstaclesArg::Open => phi_gns::model::Obstacles::Open,
             ObstaclesArg::Push => phi_gns::model::Obstacles::Push { cell_size },
