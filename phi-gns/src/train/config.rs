@@ -244,6 +244,10 @@ pub struct DataSection {
     pub cache_mib: usize,
     /// Batches prepared ahead on another thread.
     pub read_ahead: usize,
+    /// Trains on the split's first `trajectories` trajectories only (all when absent): the
+    /// lever of how much data a run sees. The normalisation statistics stay the dataset's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trajectories: Option<usize>,
 }
 
 impl TrainConfig {
@@ -405,6 +409,9 @@ impl TrainConfig {
                 "select_by = \"emd\" needs the EMD: set emd_every ≥ 1".into(),
             );
         }
+        if self.data.trajectories == Some(0) {
+            return fail("data.trajectories", "must be ≥ 1 (or absent: all)".into());
+        }
         if self.data.read_ahead == 0 {
             return fail("data.read_ahead", "must be ≥ 1".into());
         }
@@ -559,6 +566,31 @@ mod tests {
         assert_eq!(TrainConfig::from_toml(&c.to_toml(), "stored").unwrap(), c);
         let e = refusal(&text.replace("log_every = 100", "log_every = 100\nmirror = 1"));
         assert!(e.contains("mirror"), "{e}");
+    }
+
+    #[test]
+    fn the_trajectories_trained_on_are_all_unless_limited_and_stored() {
+        let text = preset();
+        let plain = TrainConfig::from_toml(&text, "preset.toml").unwrap();
+        assert_eq!(plain.data.trajectories, None);
+        let stored = plain.to_toml();
+        let data = stored
+            .split("[data]")
+            .nth(1)
+            .unwrap()
+            .split("\n[")
+            .next()
+            .unwrap();
+        assert!(
+            !data.contains("trajectories"),
+            "absent is left unsaid: {data}"
+        );
+        let limited = text.replace("read_ahead = ", "trajectories = 200\nread_ahead = ");
+        let c = TrainConfig::from_toml(&limited, "preset.toml").unwrap();
+        assert_eq!(c.data.trajectories, Some(200));
+        assert_eq!(TrainConfig::from_toml(&c.to_toml(), "stored").unwrap(), c);
+        let e = refusal(&text.replace("read_ahead = ", "trajectories = 0\nread_ahead = "));
+        assert!(e.contains("data.trajectories") && e.contains("≥ 1"), "{e}");
     }
 
     #[test]

@@ -148,9 +148,23 @@ impl WindowSampler {
         dataset: &Dataset,
         split: &str,
         spec: WindowSpec,
+        first: Option<usize>,
     ) -> Result<Self, DataError> {
         let count = dataset.split_len(split)?;
-        Self::new(split, vec![dataset.metadata().frames(); count], spec)
+        let used = match first {
+            None => count,
+            Some(first) if (1..=count).contains(&first) => first,
+            Some(first) => {
+                return Err(DataError::InvalidInput {
+                    what: "data.trajectories",
+                    reason: format!(
+                        "{first} trajectories asked of split '{split}' of {}, which holds {count}",
+                        dataset.dir().display()
+                    ),
+                });
+            }
+        };
+        Self::new(split, vec![dataset.metadata().frames(); used], spec)
     }
 
     /// The split's name.

@@ -81,6 +81,8 @@ pub struct BatchConfig {
     pub window: WindowSpec,
     /// The capacity of the trajectory cache in bytes.
     pub cache_bytes: usize,
+    /// Draws from the split's first `trajectories` trajectories only (all when `None`).
+    pub trajectories: Option<usize>,
 }
 
 impl BatchConfig {
@@ -91,6 +93,7 @@ impl BatchConfig {
             batch_size,
             window,
             cache_bytes: DEFAULT_CACHE_BYTES,
+            trajectories: None,
         }
     }
 }
@@ -109,11 +112,12 @@ impl BatchSource {
     /// The batches of `split` of `dataset` drawn as `config` says.
     ///
     /// # Errors
-    /// [`DataError::UnknownSplit`]; as `WindowSampler::new` when no trajectory is as long as
+    /// [`DataError::UnknownSplit`]; [`DataError::InvalidInput`] when `config.trajectories` is 0
+    /// or more than the split holds; as `WindowSampler::new` when no trajectory is as long as
     /// a window.
     pub fn new(dataset: &Dataset, split: &str, config: &BatchConfig) -> Result<Self, DataError> {
         Ok(BatchSource {
-            sampler: WindowSampler::for_split(dataset, split, config.window)?,
+            sampler: WindowSampler::for_split(dataset, split, config.window, config.trajectories)?,
             cache: TrajectoryCache::new(dataset, split, config.cache_bytes)?,
             seed: config.seed,
             batch_size: config.batch_size,

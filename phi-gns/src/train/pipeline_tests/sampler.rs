@@ -118,10 +118,26 @@ fn the_sampler_of_a_split_reads_the_frame_count_from_the_metadata() {
     let dir = temp_dir("sampler-split");
     write_dataset(&dir, &[3, 4, 5], 9);
     let dataset = Dataset::open(&dir).unwrap();
-    let sampler = WindowSampler::for_split(&dataset, "train", SPEC).unwrap();
+    let sampler = WindowSampler::for_split(&dataset, "train", SPEC, None).unwrap();
     assert_eq!(sampler.lengths(), [9, 9, 9]);
     assert_eq!(sampler.windows(), 3 * 4);
-    let err = WindowSampler::for_split(&dataset, "test", SPEC).unwrap_err();
+    let err = WindowSampler::for_split(&dataset, "test", SPEC, None).unwrap_err();
     assert!(matches!(err, DataError::UnknownSplit { .. }), "{err}");
+    // `data.trajectories`: the first ones only, never none or more than there are.
+    let first = WindowSampler::for_split(&dataset, "train", SPEC, Some(2)).unwrap();
+    assert_eq!(first.lengths(), [9, 9]);
+    let drawn: std::collections::BTreeSet<usize> = (0..200)
+        .flat_map(|step| first.sample(5, step, 4))
+        .map(|w| w.trajectory)
+        .collect();
+    assert_eq!(drawn, [0, 1].into());
+    for bad in [0, 4] {
+        let err = WindowSampler::for_split(&dataset, "train", SPEC, Some(bad)).unwrap_err();
+        let text = err.to_string();
+        assert!(
+            text.contains("data.trajectories") && text.contains("holds 3"),
+            "{text}"
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

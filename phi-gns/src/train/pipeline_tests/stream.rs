@@ -23,6 +23,7 @@ fn config(cache_bytes: usize) -> BatchConfig {
         batch_size: 3,
         window: SPEC,
         cache_bytes,
+        trajectories: None,
     }
 }
 
