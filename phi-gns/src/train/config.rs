@@ -18,7 +18,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::{AdamConfig, ErrorNorm, Pushforward, TrainError};
+use super::{AdamConfig, BatchConfig, ErrorNorm, Pushforward, TrainError, WindowSpec};
 use crate::data::{Metadata, Variant};
 use crate::model::{GnsConfig, ModelSpec, Walls};
 
@@ -503,6 +503,21 @@ impl TrainConfig {
             .as_ref()
             .map_or(0, Pushforward::max_unroll)
     }
+
+    /// How the run's batches are drawn: `[training]`'s seed and batch size, the windows its loss
+    /// needs, and `[data]`'s cache and trajectories.
+    pub(crate) fn batches(&self) -> BatchConfig {
+        let window = WindowSpec {
+            input_velocities: self.model.input_velocities,
+            span_before: self.frames_before(),
+            span_after: self.frames_after(),
+        };
+        BatchConfig {
+            cache_bytes: self.data.cache_mib << 20,
+            trajectories: self.data.trajectories,
+            ..BatchConfig::new(self.training.seed, self.training.batch_size, window)
+        }
+    }
 }
 
 #[cfg(test)]
@@ -585,9 +600,18 @@ mod tests {
             !data.contains("trajectories"),
             "absent is left unsaid: {data}"
         );
+        assert_eq!(plain.batches().trajectories, None);
         let limited = text.replace("read_ahead = ", "trajectories = 200\nread_ahead = ");
         let c = TrainConfig::from_toml(&limited, "preset.toml").unwrap();
         assert_eq!(c.data.trajectories, Some(200));
+        // ... and the run's batches are drawn from them.
+        let batches = c.batches();
+        assert_eq!(batches.trajectories, Some(200));
+        assert_eq!(batches.cache_bytes, c.data.cache_mib << 20);
+        assert_eq!(
+            (batches.seed, batches.batch_size),
+            (c.training.seed, c.training.batch_size)
+        );
         assert_eq!(TrainConfig::from_toml(&c.to_toml(), "stored").unwrap(), c);
         let e = refusal(&text.replace("read_ahead = ", "trajectories = 0\nread_ahead = "));
         assert!(e.contains("data.trajectories") && e.contains("≥ 1"), "{e}");

@@ -41,10 +41,9 @@ use super::checkpoint::{
     load_checkpoint, prune_checkpoints, save_best, save_checkpoint,
 };
 use super::config::{SelectBy, TrainConfig};
-use super::sampler::WindowSpec;
 use super::screening::{Screening, ScreeningPlan, screen};
 use super::step::take_step;
-use super::stream::{BatchConfig, BatchSource, BatchStream};
+use super::stream::{BatchSource, BatchStream};
 use super::{Adam, TrainError};
 use crate::data::{Dataset, METADATA_FILE, Trajectory};
 use crate::model::{Gns, GnsKernels, ModelError, load_model};
@@ -200,15 +199,7 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
                 .map(|decay| WeightAverage::new(decay, model.params()));
             (model, adam, state, average)
         };
-        let window = WindowSpec {
-            input_velocities: config.model.input_velocities,
-            span_before: config.frames_before(),
-            span_after: config.frames_after(),
-        };
-        let mut batches =
-            BatchConfig::new(config.training.seed, config.training.batch_size, window);
-        batches.cache_bytes = config.data.cache_mib << 20;
-        let source = BatchSource::new(&dataset, &config.data.split, &batches)?;
+        let source = BatchSource::new(&dataset, &config.data.split, &config.batches())?;
         let stream = BatchStream::new(source, state.step, config.data.read_ahead)?;
         let valid = if config.screening.every > 0 {
             read_split(
