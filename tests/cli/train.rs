@@ -33,7 +33,7 @@ steps = {steps}
 batch_size = 2
 seed = 11
 extra_steps = {extra_steps}
-log_every = 2{ema}
+log_every = 2{ema}{parallel}
 
 [optimizer]
 beta1 = 0.9
@@ -70,6 +70,11 @@ read_ahead = 2
         extra_steps = if extra.contains("two-step") { 1 } else { 0 },
         ema = if extra.contains("ema") {
             "\nema_decay = 0.9"
+        } else {
+            ""
+        },
+        parallel = if extra.contains("parallel") {
+            "\nparallel_graphs = true"
         } else {
             ""
         },
@@ -215,6 +220,7 @@ fn a_stopped_and_resumed_run_has_the_uninterrupted_loss_curve_bit_for_bit() {
         ("noise", "burn"),
         ("two-step", "burn"),
         ("noise-ema", "burn"),
+        ("two-step-noise-parallel", "burn"),
         ("noise", "tch"),
     ] {
         if !phi::backends::BackendKind::available()
@@ -662,6 +668,8 @@ fn every_preset_parses_and_the_full_scale_ones_are_the_thesis_recipe() {
             );
             assert_eq!(c.training.extra_steps, usize::from(name.starts_with('2')));
             assert_eq!(c.training.batch_size, 2);
+            // The CPU presets differentiate each graph of a batch on its own thread.
+            assert_eq!(c.training.parallel_graphs, !full, "{}", path.display());
             assert!(c.training.pushforward.is_none());
             assert_eq!(
                 c.screening.select_by,

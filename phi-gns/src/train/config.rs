@@ -112,6 +112,12 @@ pub struct TrainingSection {
     /// starts from the checkpoint's weights.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ema_decay: Option<f64>,
+    /// Each graph of a batch differentiated on its own, the graphs in parallel when the run
+    /// has threads for them, their gradients summed in batch order (default off: one graph of
+    /// the whole batch). The loss and its gradients are the same sums in another order, so
+    /// the bits differ from a run without it, but not between thread counts.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub parallel_graphs: bool,
 }
 
 fn is_false(value: &bool) -> bool {
@@ -581,6 +587,23 @@ mod tests {
         assert_eq!(TrainConfig::from_toml(&c.to_toml(), "stored").unwrap(), c);
         let e = refusal(&text.replace("log_every = 100", "log_every = 100\nmirror = 1"));
         assert!(e.contains("mirror"), "{e}");
+    }
+
+    #[test]
+    fn graphs_run_apart_when_a_preset_asks_and_stored_runs_without_the_key_stay_whole() {
+        let text = preset();
+        let on = TrainConfig::from_toml(&text, "preset.toml").unwrap();
+        assert!(on.training.parallel_graphs, "the CPU presets ask for it");
+        assert_eq!(TrainConfig::from_toml(&on.to_toml(), "stored").unwrap(), on);
+        let before = text.replace("parallel_graphs = true\n", "");
+        let off = TrainConfig::from_toml(&before, "preset.toml").unwrap();
+        assert!(!off.training.parallel_graphs);
+        assert!(
+            !off.to_toml().contains("parallel_graphs"),
+            "the default is left unsaid, so stored runs read as they were written"
+        );
+        let e = refusal(&text.replace("parallel_graphs = true", "parallel_graphs = 2"));
+        assert!(e.contains("parallel_graphs"), "{e}");
     }
 
     #[test]
