@@ -135,9 +135,10 @@ pub struct EvalArgs {
     /// models.
     #[arg(long = "model-obstacles", value_name = "NAME=OBSTACLES")]
     pub model_obstacles: Vec<String>,
-    /// `NAME=RUN`: the `phi train` directory whose `train.csv` `screening.png` draws for the
-    /// model named NAME, for a model copied out of its run (a model in `RUN/best/` or
-    /// `RUN/checkpoints/step-…/` is found without it). Repeat for several models.
+    /// `NAME=RUN`: the training run whose `train.csv` `screening.png` draws for the model named
+    /// NAME (its loss, and its screenings where it has them), for a model copied out of its run
+    /// (a model in `RUN/best/` or `RUN/checkpoints/step-…/` is found without it) or trained
+    /// elsewhere with a log of the same columns. Repeat for several models.
     #[arg(long = "model-run", value_name = "NAME=RUN")]
     pub model_run: Vec<String>,
     /// The split to evaluate on: train, valid, test, or another its metadata.json lists.

@@ -82,52 +82,71 @@ pub(crate) fn metric_bars(record: &EvalRecord, path: &Path) -> Result<()> {
         .with_context(|| format!("drawing {}", path.display()))
 }
 
-/// The screening rows of a `phi train` log: `(step, MSE-acc 1, rollout MSE)` of each row with
-/// a screening.
+/// The named columns of the rows of a `phi train` log where all of them are filled, one vector
+/// per column.
 ///
 /// # Errors
-/// A log that does not read or whose header lacks the columns.
-pub(crate) fn read_screening(path: &Path) -> Result<Vec<(f64, f64, f64)>> {
+/// A log that does not read, whose header lacks a column or whose field is not a number.
+fn read_columns<const K: usize>(path: &Path, names: [&str; K]) -> Result<[Vec<f64>; K]> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
-    let column = |name: &str| {
-        header
+    let mut columns = [0usize; K];
+    for (column, name) in columns.iter_mut().zip(names) {
+        *column = header
             .iter()
             .position(|h| *h == name)
-            .with_context(|| format!("{}: no column '{name}' in the header", path.display()))
-    };
-    let (step, acc, rollout) = (
-        column("step")?,
-        column("valid_mse_acc1")?,
-        column("valid_rollout_mse")?,
-    );
-    let mut rows = Vec::new();
+            .with_context(|| format!("{}: no column '{name}' in the header", path.display()))?;
+    }
+    let mut values: [Vec<f64>; K] = std::array::from_fn(|_| Vec::new());
     for (n, line) in lines.enumerate() {
         let fields: Vec<&str> = line.split(',').collect();
         let field = |k: usize| fields.get(k).copied().unwrap_or("");
-        if field(acc).is_empty() {
+        if columns.iter().any(|&k| field(k).is_empty()) {
             continue;
         }
-        let number = |k: usize| -> Result<f64> {
-            field(k).parse::<f64>().with_context(|| {
+        for (out, &k) in values.iter_mut().zip(&columns) {
+            out.push(field(k).parse::<f64>().with_context(|| {
                 format!(
                     "{}: line {}: '{}' is not a number",
                     path.display(),
                     n + 2,
                     field(k)
                 )
-            })
-        };
-        rows.push((number(step)?, number(acc)?, number(rollout)?));
+            })?);
+        }
     }
-    Ok(rows)
+    Ok(values)
 }
 
-/// The validation curves of the models that come from `phi train` directories (fig. 5.5):
-/// MSE-acc 1 and the rollout MSE over training steps. Returns whether any model had a log.
+/// The screening rows of a `phi train` log: `(step, MSE-acc 1, rollout MSE)` of each row with
+/// a screening.
+///
+/// # Errors
+/// A log that does not read or whose header lacks the columns.
+pub(crate) fn read_screening(path: &Path) -> Result<Vec<(f64, f64, f64)>> {
+    let [step, acc, rollout] = read_columns(path, ["step", "valid_mse_acc1", "valid_rollout_mse"])?;
+    Ok(step
+        .into_iter()
+        .zip(acc)
+        .zip(rollout)
+        .map(|((s, a), r)| (s, a, r))
+        .collect())
+}
+
+/// The curves of the models that come from training runs (fig. 5.5): the training loss of
+/// each log row (its mean since the row before), and where the run screened, MSE-acc 1 and the
+/// rollout MSE on the validation split over training steps. A run's `train.csv` is read by its
+/// header, so any log with `step`, `loss`, `valid_mse_acc1` and `valid_rollout_mse` columns
+/// draws (`phi train`'s, the PyTorch reference trainer's). Returns whether anything was drawn.
 pub fn screening(models: &[ModelEntry], path: &Path) -> Result<bool> {
+    let mut loss = LinePlot::new(
+        "Training loss",
+        "training step",
+        "loss, mean of each log row (normalised units²)",
+    )
+    .with_log_y(true);
     let mut acc = LinePlot::new(
         "MSE-acc 1",
         "training step",
@@ -140,10 +159,16 @@ pub fn screening(models: &[ModelEntry], path: &Path) -> Result<bool> {
         "position MSE (stored units²)",
     )
     .with_log_y(true);
-    let mut any = false;
+    let (mut logged, mut screened) = (false, false);
     for model in models {
         let Some(run) = &model.run else { continue };
-        let rows = read_screening(&run.join("train.csv"))?;
+        let log = run.join("train.csv");
+        let [steps, losses] = read_columns(&log, ["step", "loss"])?;
+        if drawable(&losses) {
+            loss = loss.with_series(Series::new(&model.label, steps, losses));
+            logged = true;
+        }
+        let rows = read_screening(&log)?;
         let (accs, rollouts): (Vec<f64>, Vec<f64>) = rows.iter().map(|r| (r.1, r.2)).unzip();
         if !drawable(&accs) || !drawable(&rollouts) {
             continue;
@@ -151,16 +176,28 @@ pub fn screening(models: &[ModelEntry], path: &Path) -> Result<bool> {
         let steps: Vec<f64> = rows.iter().map(|r| r.0).collect();
         acc = acc.with_series(Series::new(&model.label, steps.clone(), accs));
         rollout = rollout.with_series(Series::new(&model.label, steps, rollouts));
-        any = true;
+        screened = true;
     }
-    if any {
-        Figure::new("Screening on the validation split during training", 2)
-            .with_panel(acc)
-            .with_panel(rollout)
-            .write_png(path)
-            .with_context(|| format!("drawing {}", path.display()))?;
+    if !logged && !screened {
+        return Ok(false);
     }
-    Ok(any)
+    let panels = usize::from(logged) + 2 * usize::from(screened);
+    let title = if screened {
+        "Training and screening on the validation split"
+    } else {
+        "Training"
+    };
+    let mut figure = Figure::new(title, panels);
+    if logged {
+        figure = figure.with_panel(loss);
+    }
+    if screened {
+        figure = figure.with_panel(acc).with_panel(rollout);
+    }
+    figure
+        .write_png(path)
+        .with_context(|| format!("drawing {}", path.display()))?;
+    Ok(true)
 }
 
 /// Height in pixels of the caption strip above each panel of `rollouts.gif`.
@@ -189,4 +226,56 @@ pub(crate) fn captioned(
     )
     .with_context(|| format!("drawing the caption '{caption}'"))?;
     Ok(image)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A log named `train.csv` in a folder of this test's own, removed when dropped.
+    struct Log(std::path::PathBuf);
+
+    impl Drop for Log {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    fn log(test: &str, text: &str) -> (Log, std::path::PathBuf) {
+        let dir = std::env::temp_dir().join(format!("phi-plots-{}-{test}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("train.csv");
+        std::fs::write(&path, text).unwrap();
+        (Log(dir), path)
+    }
+
+    #[test]
+    fn a_log_is_read_by_its_header_and_rows_with_a_gap_are_skipped() {
+        // Columns are found by name, wherever they stand.
+        let (_dir, path) = log(
+            "header",
+            "loss,step,valid_mse_acc1,valid_rollout_mse\n\
+             2.5,100,,\n\
+             1.5,200,0.75,0.125\n",
+        );
+        let [step, loss] = read_columns(&path, ["step", "loss"]).unwrap();
+        assert_eq!((step, loss), (vec![100.0, 200.0], vec![2.5, 1.5]));
+        assert_eq!(read_screening(&path).unwrap(), vec![(200.0, 0.75, 0.125)]);
+    }
+
+    #[test]
+    fn a_missing_column_or_a_word_in_a_number_field_names_the_file_and_the_line() {
+        let (_dir, path) = log("column", "step,learning_rate\n100,0.001\n");
+        let error = format!("{:#}", read_columns(&path, ["step", "loss"]).unwrap_err());
+        assert!(
+            error.contains("train.csv") && error.contains("no column 'loss'"),
+            "{error}"
+        );
+        let (_dir, path) = log("number", "step,loss\n100,1.0\n200,nan?\n");
+        let error = format!("{:#}", read_columns(&path, ["step", "loss"]).unwrap_err());
+        assert!(
+            error.contains("line 3") && error.contains("'nan?'"),
+            "{error}"
+        );
+    }
 }
