@@ -120,21 +120,6 @@ fn read_columns<const K: usize>(path: &Path, names: [&str; K]) -> Result<[Vec<f6
     Ok(values)
 }
 
-/// The screening rows of a `phi train` log: `(step, MSE-acc 1, rollout MSE)` of each row with
-/// a screening.
-///
-/// # Errors
-/// A log that does not read or whose header lacks the columns.
-pub(crate) fn read_screening(path: &Path) -> Result<Vec<(f64, f64, f64)>> {
-    let [step, acc, rollout] = read_columns(path, ["step", "valid_mse_acc1", "valid_rollout_mse"])?;
-    Ok(step
-        .into_iter()
-        .zip(acc)
-        .zip(rollout)
-        .map(|((s, a), r)| (s, a, r))
-        .collect())
-}
-
 /// The curves of the models that come from training runs (fig. 5.5): the training loss of
 /// each log row (its mean since the row before), and where the run screened, MSE-acc 1 and the
 /// rollout MSE on the validation split over training steps. A run's `train.csv` is read by its
@@ -168,12 +153,11 @@ pub fn screening(models: &[ModelEntry], path: &Path) -> Result<bool> {
             loss = loss.with_series(Series::new(&model.label, steps, losses));
             logged = true;
         }
-        let rows = read_screening(&log)?;
-        let (accs, rollouts): (Vec<f64>, Vec<f64>) = rows.iter().map(|r| (r.1, r.2)).unzip();
+        let [steps, accs, rollouts] =
+            read_columns(&log, ["step", "valid_mse_acc1", "valid_rollout_mse"])?;
         if !drawable(&accs) || !drawable(&rollouts) {
             continue;
         }
-        let steps: Vec<f64> = rows.iter().map(|r| r.0).collect();
         acc = acc.with_series(Series::new(&model.label, steps.clone(), accs));
         rollout = rollout.with_series(Series::new(&model.label, steps, rollouts));
         screened = true;
@@ -232,27 +216,17 @@ pub(crate) fn captioned(
 mod tests {
     use super::*;
 
-    /// A log named `train.csv` in a folder of this test's own, removed when dropped.
-    struct Log(std::path::PathBuf);
-
-    impl Drop for Log {
-        fn drop(&mut self) {
-            let _ = std::fs::remove_dir_all(&self.0);
-        }
-    }
-
-    fn log(test: &str, text: &str) -> (Log, std::path::PathBuf) {
-        let dir = std::env::temp_dir().join(format!("phi-plots-{}-{test}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("train.csv");
+    /// A log named `train.csv` with `text` in a fresh folder of the test `test`.
+    fn log(test: &str, text: &str) -> std::path::PathBuf {
+        let path = crate::output::test_util::temp_dir(&format!("plots-{test}")).join("train.csv");
         std::fs::write(&path, text).unwrap();
-        (Log(dir), path)
+        path
     }
 
     #[test]
     fn a_log_is_read_by_its_header_and_rows_with_a_gap_are_skipped() {
         // Columns are found by name, wherever they stand.
-        let (_dir, path) = log(
+        let path = log(
             "header",
             "loss,step,valid_mse_acc1,valid_rollout_mse\n\
              2.5,100,,\n\
@@ -260,18 +234,19 @@ mod tests {
         );
         let [step, loss] = read_columns(&path, ["step", "loss"]).unwrap();
         assert_eq!((step, loss), (vec![100.0, 200.0], vec![2.5, 1.5]));
-        assert_eq!(read_screening(&path).unwrap(), vec![(200.0, 0.75, 0.125)]);
+        let screened = read_columns(&path, ["step", "valid_mse_acc1", "valid_rollout_mse"]);
+        assert_eq!(screened.unwrap(), [vec![200.0], vec![0.75], vec![0.125]]);
     }
 
     #[test]
     fn a_missing_column_or_a_word_in_a_number_field_names_the_file_and_the_line() {
-        let (_dir, path) = log("column", "step,learning_rate\n100,0.001\n");
+        let path = log("column", "step,learning_rate\n100,0.001\n");
         let error = format!("{:#}", read_columns(&path, ["step", "loss"]).unwrap_err());
         assert!(
             error.contains("train.csv") && error.contains("no column 'loss'"),
             "{error}"
         );
-        let (_dir, path) = log("number", "step,loss\n100,1.0\n200,nan?\n");
+        let path = log("number", "step,loss\n100,1.0\n200,nan?\n");
         let error = format!("{:#}", read_columns(&path, ["step", "loss"]).unwrap_err());
         assert!(
             error.contains("line 3") && error.contains("'nan?'"),
