@@ -380,15 +380,10 @@ def train_loss(args):
         sys.exit("error: --train-loss needs --init-from MODEL_DIR")
     _, device, train, model = build(args)
     model.eval()
-    c = model.velocities
-    rng = np.random.default_rng(args.train_loss_seed)
+    batcher = Batcher(train, model.velocities, args.train_loss_seed)
     error_sum, zero_sum, counted, began = 0.0, 0.0, 0.0, time.perf_counter()
     for _ in range(args.train_loss):
-        positions, particle_type = train.load(int(rng.integers(len(train))))
-        t = int(rng.integers(c, positions.shape[0] - 1))
-        window = torch.from_numpy(positions[t - c : t + 1].transpose(1, 0, 2).copy()).to(device)
-        target = torch.from_numpy(positions[t + 1]).to(device)
-        types = torch.from_numpy(particle_type).to(device)
+        ((window, target, types),) = batcher.draw(1, device)
         senders, receivers = radius_graph(window[:, -1], model.radius)
         acceleration = (target - 2 * window[:, -1] + window[:, -2] - model.acc_mean) / model.acc_scale
         predicted = model(window, types, senders, receivers)
