@@ -34,8 +34,9 @@ mod trajectory;
 pub use probe::{ProbeResult, ProbeScene, probe, probe_scene};
 pub use summary::{Band, ModelSummary, PlausibilitySummary};
 pub use trajectory::{
-    Curves, EmdCost, EvalOptions, OneStepErrors, Plausibility, TrajectoryEvaluation,
-    evaluate_trajectory, evaluate_trajectory_with, mse_acc1, mse_acc1_in, one_step_errors,
+    Curves, EmdCost, EvalOptions, OneStepErrors, Plausibility, TrajectoryComparison,
+    TrajectoryEvaluation, compare_trajectories, evaluate_trajectory, evaluate_trajectory_with,
+    mse_acc1, mse_acc1_in, one_step_errors,
 };
 
 use phi_core::point_sets::PointSetError;

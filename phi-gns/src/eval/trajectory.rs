@@ -287,21 +287,9 @@ pub fn evaluate_trajectory_with<B: GnsKernels>(
         )),
         _ => None,
     };
-    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
     let sinkhorns: Vec<f64> = curves.sinkhorn.iter().flatten().copied().collect();
     let (ke_error, density_ratio) = if complete {
-        let diff: f64 = curves
-            .kinetic_energy_predicted
-            .iter()
-            .zip(&curves.kinetic_energy_true)
-            .map(|(p, t)| (p - t).abs())
-            .sum();
-        let truth: f64 = curves.kinetic_energy_true.iter().sum();
-        let density_true = mean(&curves.density_true);
-        (
-            (truth > 0.0).then(|| diff / truth),
-            (density_true > 0.0).then(|| mean(&curves.density_predicted) / density_true),
-        )
+        energy_and_density(&curves)
     } else {
         (None, None)
     };
@@ -322,6 +310,139 @@ pub fn evaluate_trajectory_with<B: GnsKernels>(
         kinetic_energy_error: ke_error,
         density_ratio,
         failed_step: failed,
+        plausibility,
+        curves,
+    })
+}
+
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len() as f64
+}
+
+/// The relative kinetic-energy error `Σ_t |KE_pred − KE_true| / Σ_t KE_true` and the mean
+/// density ratio of complete curves (`None` where the truth's is zero).
+fn energy_and_density(curves: &Curves) -> (Option<f64>, Option<f64>) {
+    let diff: f64 = curves
+        .kinetic_energy_predicted
+        .iter()
+        .zip(&curves.kinetic_energy_true)
+        .map(|(p, t)| (p - t).abs())
+        .sum();
+    let truth: f64 = curves.kinetic_energy_true.iter().sum();
+    let density_true = mean(&curves.density_true);
+    (
+        (truth > 0.0).then(|| diff / truth),
+        (density_true > 0.0).then(|| mean(&curves.density_predicted) / density_true),
+    )
+}
+
+/// Two trajectories of one scene compared frame by frame as a model's rollout is against the
+/// truth ([`compare_trajectories`]): the metrics of [`TrajectoryEvaluation`] that need no model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrajectoryComparison {
+    /// The trajectory's index in its split.
+    pub index: usize,
+    /// Liquid particles (the metrics' particles).
+    pub liquid_particles: usize,
+    /// The frame after which the comparison starts (a model's `C`).
+    pub start: usize,
+    /// The position MSE over the compared frames (MSE 400 for a 401-frame trajectory from 5).
+    pub mse400: f64,
+    /// The mean of the EMD curve.
+    pub emd: f64,
+    /// The mean of the computed Sinkhorn divergences (`null` when none was asked for).
+    pub sinkhorn: Option<f64>,
+    /// As [`TrajectoryEvaluation::kinetic_energy_error`].
+    pub kinetic_energy_error: Option<f64>,
+    /// As [`TrajectoryEvaluation::density_ratio`].
+    pub density_ratio: Option<f64>,
+    /// With [`EvalOptions::container`]: the plausibility figures.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plausibility: Option<Plausibility>,
+    /// The per-frame curves.
+    pub curves: Curves,
+}
+
+/// Compares `other` with `truth`, two trajectories of one scene (another simulator, another
+/// sampling of the initial liquid), over frames `start + 1 ..` as [`evaluate_trajectory`]
+/// compares a model's full rollout from `start = C`: the position MSE, the EMD, the Sinkhorn
+/// divergence, the kinetic-energy and density ratios and the plausibility figures, over the
+/// particles whose type is not in `kinematic_types`. Particle `i` of one is compared with
+/// particle `i` of the other in the MSE; the EMD pairs them as it likes.
+///
+/// # Errors
+/// [`EvalError::Input`] for trajectories of different particle counts, types, dimensions or
+/// lengths, one without liquid or too short for a frame after `start`; metric errors.
+pub fn compare_trajectories(
+    other: &Trajectory,
+    truth: &Trajectory,
+    start: usize,
+    kinematic_types: &[i64],
+    options: &EvalOptions,
+) -> Result<TrajectoryComparison, EvalError> {
+    let refuse = |reason: String| EvalError::Input {
+        what: "comparison",
+        reason,
+    };
+    let index = truth.index;
+    if (other.particles, other.dim, other.frames) != (truth.particles, truth.dim, truth.frames) {
+        return Err(refuse(format!(
+            "trajectory {index}: {} particles in {}D over {} frames against {} in {}D over {}",
+            other.particles, other.dim, other.frames, truth.particles, truth.dim, truth.frames
+        )));
+    }
+    if other.particle_type != truth.particle_type {
+        return Err(refuse(format!(
+            "trajectory {index}: the particle types differ (not the same scene)"
+        )));
+    }
+    if start + 1 >= truth.frames {
+        return Err(refuse(format!(
+            "trajectory {index}: {} frames leave none after frame {start}",
+            truth.frames
+        )));
+    }
+    let liquid: Vec<bool> = truth
+        .particle_type
+        .iter()
+        .map(|t| !kinematic_types.contains(t))
+        .collect();
+    let liquid_particles = liquid.iter().filter(|l| **l).count();
+    if liquid_particles == 0 {
+        return Err(refuse(format!(
+            "trajectory {index} has no liquid particles"
+        )));
+    }
+    let range = RolloutRange {
+        start,
+        steps: truth.frames - 1 - start,
+    };
+    let mut metrics = FrameMetrics::new(truth, &liquid, options, range, other.frame(start));
+    for step in 1..=range.steps {
+        metrics.push(start + step, step, other.frame(start + step))?;
+    }
+    let (curves, centres) = (metrics.curves, metrics.final_centres);
+    let plausibility = match (&options.container, &centres) {
+        (Some(container), Some((predicted, truth))) => Some(plausibility(
+            &curves,
+            liquid_particles,
+            container.cell_size,
+            predicted,
+            truth,
+        )),
+        _ => None,
+    };
+    let sinkhorns: Vec<f64> = curves.sinkhorn.iter().flatten().copied().collect();
+    let (kinetic_energy_error, density_ratio) = energy_and_density(&curves);
+    Ok(TrajectoryComparison {
+        index,
+        liquid_particles,
+        start,
+        mse400: mean(&curves.mse),
+        emd: mean(&curves.emd),
+        sinkhorn: (!sinkhorns.is_empty()).then(|| mean(&sinkhorns)),
+        kinetic_energy_error,
+        density_ratio,
         plausibility,
         curves,
     })
@@ -498,6 +619,123 @@ struct FullRollout {
     final_centres: Option<(Vec<f64>, Vec<f64>)>,
 }
 
+/// The per-frame metrics of a predicted trajectory against the truth, a frame at a time: the
+/// curves of [`Curves`] and the last frame's centres of mass.
+struct FrameMetrics<'a> {
+    truth: &'a Trajectory,
+    liquid: &'a [bool],
+    kinematic: Vec<bool>,
+    options: &'a EvalOptions,
+    /// The last step of the range (the Sinkhorn divergence is always computed there).
+    last_step: usize,
+    // Consecutive frames differ little: each EMD starts from the previous frame's solution.
+    emd: EmdSolver,
+    sinkhorn: SinkhornOptions,
+    /// The predicted frame before the one pushed next (for its kinetic energy).
+    previous: Vec<f32>,
+    obstacles: Option<std::collections::HashSet<Vec<i64>>>,
+    curves: Curves,
+    final_centres: Option<(Vec<f64>, Vec<f64>)>,
+}
+
+impl<'a> FrameMetrics<'a> {
+    /// Metrics of the frames after `range.start`, whose predicted positions are `first`.
+    fn new(
+        truth: &'a Trajectory,
+        liquid: &'a [bool],
+        options: &'a EvalOptions,
+        range: RolloutRange,
+        first: &[f32],
+    ) -> Self {
+        let obstacles = options
+            .container
+            .as_ref()
+            .map(|box_| box_.obstacle_cells(truth.frame(range.start), liquid, truth.dim));
+        FrameMetrics {
+            truth,
+            liquid,
+            kinematic: liquid.iter().map(|l| !l).collect(),
+            options,
+            last_step: range.steps,
+            emd: EmdSolver::new(),
+            sinkhorn: SinkhornOptions::new(options.sinkhorn_epsilon),
+            previous: first.to_vec(),
+            obstacles,
+            curves: Curves::default(),
+            final_centres: None,
+        }
+    }
+
+    /// Adds predicted frame `frame` (`step` steps after the start) with positions `positions`.
+    fn push(&mut self, frame: usize, step: usize, positions: &[f32]) -> Result<(), EvalError> {
+        let (liquid, dim, options) = (self.liquid, self.truth.dim, self.options);
+        let truth = self.truth.frame(frame);
+        let curves = &mut self.curves;
+        let predicted_liquid = liquid_positions(positions, liquid, dim);
+        let true_liquid = liquid_positions(truth, liquid, dim);
+        curves.frame.push(frame);
+        curves
+            .mse
+            .push(position_mse(positions, truth, &self.kinematic, dim));
+        curves.emd.push(self.emd.solve(
+            &predicted_liquid,
+            &true_liquid,
+            dim,
+            options.ground_cost.into(),
+        )?);
+        let every = options.sinkhorn_every;
+        curves.sinkhorn.push(
+            if every > 0 && (step.is_multiple_of(every) || step == self.last_step) {
+                Some(sinkhorn_divergence_host(
+                    &predicted_liquid,
+                    &true_liquid,
+                    dim,
+                    &self.sinkhorn,
+                )?)
+            } else {
+                None
+            },
+        );
+        curves.kinetic_energy_predicted.push(kinetic_energy(
+            &self.previous,
+            positions,
+            liquid,
+            dim,
+        ));
+        curves.kinetic_energy_true.push(kinetic_energy(
+            self.truth.frame(frame - 1),
+            truth,
+            liquid,
+            dim,
+        ));
+        curves.density_predicted.push(mean_neighbour_count(
+            positions,
+            liquid,
+            dim,
+            options.density_radius,
+        )?);
+        curves.density_true.push(mean_neighbour_count(
+            truth,
+            liquid,
+            dim,
+            options.density_radius,
+        )?);
+        if let (Some(container), Some(obstacles)) = (&options.container, &self.obstacles) {
+            let (outside, inside) = container.misplaced(positions, liquid, dim, obstacles);
+            curves.outside.push(outside);
+            curves.inside_obstacles.push(inside);
+            let (_, inside_true) = container.misplaced(truth, liquid, dim, obstacles);
+            curves.inside_obstacles_true.push(inside_true);
+        }
+        self.final_centres = Some((
+            centre_of_mass(positions, liquid, dim),
+            centre_of_mass(truth, liquid, dim),
+        ));
+        self.previous.copy_from_slice(positions);
+        Ok(())
+    }
+}
+
 /// Rolls out from frame `C` to the last frame, computing the per-frame metrics as frames come.
 fn full_rollout<B: GnsKernels>(
     model: &Gns<B>,
@@ -508,86 +746,13 @@ fn full_rollout<B: GnsKernels>(
     mut on_frame: impl FnMut(usize, &[f32]),
 ) -> Result<FullRollout, EvalError> {
     let c = model.spec().config.input_velocities;
-    let dim = trajectory.dim;
     let range = RolloutRange::full(c, trajectory.frames);
-    let kinematic: Vec<bool> = liquid.iter().map(|l| !l).collect();
-    let sinkhorn = SinkhornOptions::new(options.sinkhorn_epsilon);
-    let mut curves = Curves::default();
-    // Consecutive frames differ little: each EMD starts from the previous frame's solution.
-    let mut emd = EmdSolver::new();
-    let mut previous = trajectory.frame(c).to_vec();
+    let mut metrics = FrameMetrics::new(trajectory, liquid, options, range, trajectory.frame(c));
     let mut metric_error: Option<EvalError> = None;
-    let obstacles = options
-        .container
-        .as_ref()
-        .map(|box_| box_.obstacle_cells(trajectory.frame(c), liquid, dim));
-    let mut final_centres = None;
     let ran = rollout(model, trajectory, range, device, |step, positions| {
         let frame = c + step;
         on_frame(frame, positions);
-        let truth = trajectory.frame(frame);
-        let outcome = (|| -> Result<(), EvalError> {
-            let predicted_liquid = liquid_positions(positions, liquid, dim);
-            let true_liquid = liquid_positions(truth, liquid, dim);
-            curves.frame.push(frame);
-            curves
-                .mse
-                .push(position_mse(positions, truth, &kinematic, dim));
-            curves.emd.push(emd.solve(
-                &predicted_liquid,
-                &true_liquid,
-                dim,
-                options.ground_cost.into(),
-            )?);
-            let every = options.sinkhorn_every;
-            curves
-                .sinkhorn
-                .push(if every > 0 && (step % every == 0 || step == range.steps) {
-                    Some(sinkhorn_divergence_host(
-                        &predicted_liquid,
-                        &true_liquid,
-                        dim,
-                        &sinkhorn,
-                    )?)
-                } else {
-                    None
-                });
-            curves
-                .kinetic_energy_predicted
-                .push(kinetic_energy(&previous, positions, liquid, dim));
-            curves.kinetic_energy_true.push(kinetic_energy(
-                trajectory.frame(frame - 1),
-                truth,
-                liquid,
-                dim,
-            ));
-            curves.density_predicted.push(mean_neighbour_count(
-                positions,
-                liquid,
-                dim,
-                options.density_radius,
-            )?);
-            curves.density_true.push(mean_neighbour_count(
-                truth,
-                liquid,
-                dim,
-                options.density_radius,
-            )?);
-            if let (Some(container), Some(obstacles)) = (&options.container, &obstacles) {
-                let (outside, inside) = container.misplaced(positions, liquid, dim, obstacles);
-                curves.outside.push(outside);
-                curves.inside_obstacles.push(inside);
-                let (_, inside_true) = container.misplaced(truth, liquid, dim, obstacles);
-                curves.inside_obstacles_true.push(inside_true);
-            }
-            final_centres = Some((
-                centre_of_mass(positions, liquid, dim),
-                centre_of_mass(truth, liquid, dim),
-            ));
-            previous.copy_from_slice(positions);
-            Ok(())
-        })();
-        outcome.map_err(|e| {
+        metrics.push(frame, step, positions).map_err(|e| {
             metric_error = Some(e);
             ModelError::Input {
                 what: "evaluation",
@@ -604,8 +769,8 @@ fn full_rollout<B: GnsKernels>(
         Err(e) => return Err(e.into()),
     };
     Ok(FullRollout {
-        curves,
+        curves: metrics.curves,
         failed_step,
-        final_centres,
+        final_centres: metrics.final_centres,
     })
 }

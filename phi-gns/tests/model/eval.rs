@@ -403,3 +403,112 @@ fn plausibility_needs_every_figure_within_its_bounds() {
         assert!(!p.is_plausible(), "{p:?}");
     }
 }
+
+/// `trajectory`'s liquid moved by `shift` in every frame (its obstacle particles stay).
+fn shifted(trajectory: &Trajectory, shift: [f32; 2]) -> Trajectory {
+    let mut position = trajectory.position.clone();
+    for (p, kind) in position
+        .chunks_exact_mut(2)
+        .zip(trajectory.particle_type.iter().cycle())
+    {
+        if *kind == LIQUID {
+            p[0] += shift[0];
+            p[1] += shift[1];
+        }
+    }
+    Trajectory::new(2, position, trajectory.particle_type.clone(), 0, 0).unwrap()
+}
+
+fn comparison_options() -> EvalOptions {
+    let mut options = EvalOptions::new(0.015);
+    options.sinkhorn_every = 0;
+    options.container = Some(phi_gns::eval::metrics::Container {
+        bounds: vec![[0.1, 0.9], [0.1, 0.9]],
+        cell_size: 0.025,
+    });
+    options
+}
+
+#[test]
+fn a_trajectory_compared_with_itself_and_with_its_translate_gives_the_analytic_metrics() {
+    use phi_gns::eval::compare_trajectories;
+    let truth = trajectory(30);
+    let options = comparison_options();
+    let same = compare_trajectories(&truth, &truth, C, &[OBSTACLE], &options).unwrap();
+    assert_eq!(same.curves.frame, (C + 1..30).collect::<Vec<_>>());
+    assert_eq!((same.mse400, same.emd), (0.0, 0.0));
+    assert_eq!(same.kinetic_energy_error, Some(0.0));
+    assert_eq!(same.density_ratio, Some(1.0));
+    let p = same.plausibility.unwrap();
+    assert_eq!(p.outside, 0.0);
+    assert_eq!(p.inside_obstacles, p.inside_obstacles_true);
+    assert_eq!(p.final_density_ratio, 1.0);
+    assert_eq!(p.late_kinetic_energy_ratio, 1.0);
+    assert_eq!(p.final_centre_distance_cells, 0.0);
+
+    // A translation by d: every particle is |d| away from its twin, so the per-component MSE
+    // is |d|²/2; the EMD (squared Euclidean) is |d|² (the translation is an optimal transport
+    // map, and no plan costs less than the squared distance of the means); the centres of
+    // mass are |d| apart; the motion is the same.
+    let d = [0.003f32, -0.004];
+    let moved = shifted(&truth, d);
+    let cmp = compare_trajectories(&moved, &truth, C, &[OBSTACLE], &options).unwrap();
+    let d2 = f64::from(d[0]).powi(2) + f64::from(d[1]).powi(2);
+    assert!((cmp.mse400 - d2 / 2.0).abs() < 1e-3 * d2, "{}", cmp.mse400);
+    assert!((cmp.emd - d2).abs() < 1e-3 * d2, "{} against {d2}", cmp.emd);
+    let p = cmp.plausibility.unwrap();
+    assert!((p.final_centre_distance_cells - d2.sqrt() / 0.025).abs() < 1e-3);
+    assert!((p.late_kinetic_energy_ratio - 1.0).abs() < 1e-3, "{p:?}");
+    assert!(cmp.kinetic_energy_error.unwrap() < 1e-3);
+}
+
+#[test]
+fn comparing_a_model_rollout_as_a_trajectory_gives_the_evaluation_curves() {
+    use phi_gns::eval::compare_trajectories;
+    let device = NdArray::default_device();
+    let model = small_model();
+    let frames = 24;
+    let truth = trajectory(frames);
+    let range = RolloutRange::full(C, frames);
+    // The rollout's frames after the truth's first C + 1: what the evaluation compares.
+    let mut position = truth.position[..(C + 1) * truth.particles * 2].to_vec();
+    position.extend(rollout_positions(&model, &truth, range, &device).unwrap());
+    let rolled = Trajectory::new(2, position, truth.particle_type.clone(), 0, 0).unwrap();
+    let mut options = comparison_options();
+    options.sinkhorn_every = 7;
+    let eval = evaluate_trajectory(&model, &truth, &options, &device).unwrap();
+    let cmp = compare_trajectories(&rolled, &truth, C, &[OBSTACLE], &options).unwrap();
+    assert_eq!(cmp.curves, eval.curves);
+    assert_eq!(Some(cmp.mse400), eval.mse400);
+    assert_eq!(Some(cmp.emd), eval.emd);
+    assert_eq!(cmp.sinkhorn, eval.sinkhorn);
+    assert_eq!(cmp.plausibility, eval.plausibility);
+    assert_eq!(
+        (cmp.kinetic_energy_error, cmp.density_ratio),
+        (eval.kinetic_energy_error, eval.density_ratio)
+    );
+}
+
+#[test]
+fn trajectories_of_different_scenes_are_not_compared() {
+    use phi_gns::eval::compare_trajectories;
+    let options = comparison_options();
+    let err = compare_trajectories(&trajectory(30), &trajectory(31), C, &[OBSTACLE], &options)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("over 30 frames against 11 in 2D over 31"),
+        "{err}"
+    );
+    let truth = trajectory(30);
+    let mut other = truth.clone();
+    other.particle_type[0] = LIQUID;
+    let err = compare_trajectories(&other, &truth, C, &[OBSTACLE], &options)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("particle types differ"), "{err}");
+    let err = compare_trajectories(&truth, &truth, 29, &[OBSTACLE], &options)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("none after frame 29"), "{err}");
+}
