@@ -31,6 +31,10 @@ pub enum DatasetCommand {
         #[arg(long)]
         force: bool,
     },
+    /// Measure the trajectories of another dataset of the same scenes (another jitter seed,
+    /// scheme or solver) against this one's, with the metrics of `phi eval`: how far apart two
+    /// simulations of one scene are.
+    Compare(super::compare::CompareArgs),
     /// Particle counts and the neighbour-count distribution over time (thesis fig. 5.4).
     Stats {
         /// The dataset directory (a positional DATA, the form before --data, is deprecated).
@@ -144,6 +148,7 @@ pub fn run(command: DatasetCommand) -> Result<()> {
     match command {
         DatasetCommand::Generate(args) => super::generate::run(args),
         DatasetCommand::Merge { out, shards, force } => run_merge(out, shards, force),
+        DatasetCommand::Compare(args) => super::compare::run(args),
         DatasetCommand::Stats {
             data,
             data_positional,

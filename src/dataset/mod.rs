@@ -3,6 +3,8 @@
 //! Generation and merging live in [`phi_dataset`] (re-exported here), which the Python module
 //! calls too; the commands parse their arguments, call it and report ([`cli`], [`generate`]).
 //! Here besides:
+//! - [`compare`]: two datasets of the same scenes measured against each other as `phi eval`
+//!   measures a rollout (the spread of the simulator itself);
 //! - [`stats`]: particle counts and the neighbour-count distribution over time (thesis fig. 5.4);
 //! - [`render`]: a GIF of one trajectory;
 //! - [`export`]: the dataset for numpy, DeepMind's TFRecord reader, geoelements/gns and
@@ -13,6 +15,7 @@
 //! commands.
 
 pub mod cli;
+pub mod compare;
 pub mod export;
 pub mod generate;
 pub mod render;

@@ -633,3 +633,77 @@ fn a_closed_stdout_ends_a_command_quietly() {
     }
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn compare_measures_a_test_split_against_itself_and_another_jitter() {
+    let dir = scratch("dataset-compare");
+    let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/test");
+    // The first two test scenes, their jitter seeds moved.
+    let reseeded = dir.join("scenes");
+    std::fs::create_dir_all(&reseeded).unwrap();
+    for name in ["01_tall_drop.toml", "02_narrow_gap.toml"] {
+        let text = std::fs::read_to_string(scenes.join(name)).unwrap();
+        let text = text.replace("seed = 100", "seed = 900");
+        assert!(text.contains("seed = 900"), "{name}: {text}");
+        std::fs::write(reseeded.join(name), text).unwrap();
+    }
+    let (data, other) = (dir.join("data"), dir.join("other"));
+    let make = |out: &Path, extra: &[&str]| {
+        let mut command = phi();
+        command
+            .args(["dataset", "generate", "--split", "test", "--steps", "12"])
+            .args(["--trajectories", "2", "--out"])
+            .arg(out)
+            .args(extra);
+        ok(command.output().unwrap())
+    };
+    make(&data, &[]);
+    make(&other, &["--scenes", reseeded.to_str().unwrap()]);
+    let compare = |a: &Path, b: &Path| {
+        let mut command = phi();
+        command
+            .args(["dataset", "compare", "--data"])
+            .arg(a)
+            .arg("--other")
+            .arg(b);
+        command.output().unwrap()
+    };
+    let mean_row = |stdout: &str| -> Vec<String> {
+        let row = stdout.lines().find(|l| l.starts_with("| mean")).unwrap();
+        row.split('|').map(|c| c.trim().to_string()).collect()
+    };
+    // Against itself every distance is zero and every ratio one.
+    let same = ok(compare(&data, &data));
+    assert_eq!(
+        same.lines().filter(|l| l.starts_with("| ")).count(),
+        4,
+        "{same}"
+    );
+    let row = mean_row(&same);
+    assert_eq!(&row[2..4], ["0.000", "0.000"], "{same}");
+    assert_eq!(&row[6..9], ["1.00", "1.00", "0.0"], "{same}");
+    // Another jitter of the same liquid: the particles part, the liquid stays in the box.
+    let moved = ok(compare(&data, &other));
+    let row = mean_row(&moved);
+    let emd: f64 = row[2].parse().unwrap();
+    let mse: f64 = row[3].parse().unwrap();
+    assert!(emd > 0.0 && mse > 0.0, "{moved}");
+    assert_eq!(row[4], "0.0 %", "{moved}");
+    // Another domain is refused, naming both datasets.
+    let tall = dir.join("tall");
+    ok(phi()
+        .args([
+            "dataset", "generate", "--split", "test", "--steps", "3", "--out",
+        ])
+        .arg(&tall)
+        .arg("--scenes")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/generalisation"))
+        .args(["--position-scale", "0.025"])
+        .output()
+        .unwrap());
+    let err = failed(compare(&data, &tall));
+    assert!(
+        err.contains("not the same domain") && err.contains("--other"),
+        "{err}"
+    );
+}
