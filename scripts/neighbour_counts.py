@@ -25,13 +25,7 @@ import sys
 
 import numpy as np
 
-
-def liquid_type(metadata):
-    names = metadata["particle_types"]
-    for key, name in names.items():
-        if name == "liquid":
-            return int(key)
-    raise SystemExit(f"metadata.json: particle_types {names} names no 'liquid' type")
+from late_kinetic_energy import liquid_type  # the scripts folder is on the path when run
 
 
 def neighbour_counts(x, radius):
