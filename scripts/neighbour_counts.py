@@ -81,9 +81,9 @@ def main(argv):
             if not os.path.exists(path):
                 raise SystemExit(f"{path}: no rollout of {split} trajectory {i} (run `phi rollout --all`)")
             with np.load(path) as r:
-                predicted = r["predicted_position"][:, kinds == liquid].astype(np.float64)
                 if r["particle_type"].shape != kinds.shape or (r["particle_type"] != kinds).any():
                     raise SystemExit(f"{path}: its particle types are not those of {split} trajectory {i}")
+                predicted = r["predicted_position"][:, kinds == liquid].astype(np.float64)
             model = summary(neighbour_counts(predicted[-1], radius))
             walls = most_on_walls(predicted, bounds, cell)
             row += [model[0], model[1], model[1] / first[1], walls]
