@@ -96,6 +96,7 @@ fn init_argument(key: &str) -> Option<&'static str> {
         "config.embedding_size" => "embedding",
         "config.connectivity_radius" => "radius",
         "config.noise_std" => "noise_std",
+        "config.boundary_horizon" => "boundary_horizon",
         _ => return None,
     })
 }
@@ -147,14 +148,15 @@ impl Model {
     /// --data DATA`` makes it (the same options and seed give the same weights, bit for bit).
     /// Sizes default to the thesis' GNS, ``radius`` to the dataset's
     /// ``default_connectivity_radius``, ``boundary_features`` to on unless the dataset's walls
-    /// are particles. The model lives in memory; ``save(dir)`` writes it.
+    /// are particles, ``boundary_horizon`` (where the boundary features saturate, in multiples
+    /// of the radius) to 1. The model lives in memory; ``save(dir)`` writes it.
     ///
     /// Raises:
     ///     DatasetError: ``data`` has no valid ``metadata.json``.
     ///     ModelError: options that do not make a valid model (naming the argument), a dataset
     ///         without usable statistics (naming its metadata key).
     #[staticmethod]
-    #[pyo3(signature = (data, seed = 0, latent = None, hidden = None, hidden_layers = None, message_passing_steps = None, input_velocities = None, embedding = None, radius = None, boundary_features = None, noise_std = None, backend = "ndarray"))]
+    #[pyo3(signature = (data, seed = 0, latent = None, hidden = None, hidden_layers = None, message_passing_steps = None, input_velocities = None, embedding = None, radius = None, boundary_features = None, boundary_horizon = None, noise_std = None, backend = "ndarray"))]
     #[allow(clippy::too_many_arguments)]
     fn init(
         py: Python<'_>,
@@ -168,6 +170,7 @@ impl Model {
         embedding: Option<usize>,
         radius: Option<f64>,
         boundary_features: Option<bool>,
+        boundary_horizon: Option<f64>,
         noise_std: Option<f64>,
         backend: &str,
     ) -> PyResult<Model> {
@@ -183,6 +186,7 @@ impl Model {
                 embedding_size: embedding,
                 connectivity_radius: radius,
                 boundary_features,
+                boundary_horizon,
                 noise_std,
             };
             let config = GnsConfig::for_dataset(&metadata, &overrides);

@@ -94,6 +94,10 @@ pub struct InitArgs {
     /// particles.
     #[arg(long)]
     pub boundary_features: bool,
+    /// Distance to a wall, in multiples of R, at which the boundary features saturate
+    /// [default: 1].
+    #[arg(long)]
+    pub boundary_horizon: Option<f64>,
     /// Standard deviation σ of the training noise; it widens the normalisation [default: 0].
     #[arg(long)]
     pub noise_std: Option<f64>,
@@ -128,6 +132,7 @@ pub(crate) fn config_for(args: &InitArgs, metadata: &Metadata) -> GnsConfig {
         embedding_size: args.embedding,
         connectivity_radius: args.radius,
         boundary_features,
+        boundary_horizon: args.boundary_horizon,
         noise_std: args.noise_std,
     };
     GnsConfig::for_dataset(metadata, &overrides)
@@ -144,6 +149,7 @@ fn option_of(key: &str) -> Option<&'static str> {
         "config.embedding_size" => "--embedding",
         "config.connectivity_radius" => "--radius",
         "config.noise_std" => "--noise-std",
+        "config.boundary_horizon" => "--boundary-horizon",
         _ => return None,
     })
 }
@@ -230,7 +236,13 @@ pub fn run(command: ModelCommand) -> Result<()> {
                 } else {
                     "none".to_string()
                 },
-                if c.boundary_features { "on" } else { "off" },
+                if !c.boundary_features {
+                    "off".to_string()
+                } else if c.boundary_horizon == 1.0 {
+                    "on".to_string()
+                } else {
+                    format!("on to {} R", c.boundary_horizon)
+                },
                 c.noise_std,
                 summary.spec.seed
             );

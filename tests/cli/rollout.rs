@@ -231,9 +231,27 @@ fn model_init_writes_a_seeded_model_for_the_dataset() {
     ok(init(&walls, &m, &["--boundary-features", "--force"]));
     assert!(read_spec(&m).unwrap().config.boundary_features);
 
+    // The boundary features' horizon: written only when it is not DeepMind's R.
+    assert!(
+        !json(&model.join("model.json"))["config"]
+            .as_object()
+            .unwrap()
+            .contains_key("boundary_horizon")
+    );
+    let far = dir.join("far");
+    let stdout = ok(init(&data, &far, &["--boundary-horizon", "4"]));
+    assert!(stdout.contains("boundary features on to 4 R"), "{stdout}");
+    assert_eq!(read_spec(&far).unwrap().config.boundary_horizon, 4.0);
+    assert_eq!(
+        json(&far.join("model.json"))["config"]["boundary_horizon"],
+        4.0
+    );
+
     // A bad size names the option.
     let stderr = failed(init(&data, &dir.join("bad"), &["--hidden", "0"]));
     assert!(stderr.contains("--hidden"), "{stderr}");
+    let stderr = failed(init(&data, &dir.join("bad"), &["--boundary-horizon", "0"]));
+    assert!(stderr.contains("--boundary-horizon"), "{stderr}");
     // Directories it did not write are refused, even with --force, and left as they were: other
     // files, a model another command wrote, weights without a model.json.
     let foreign = dir.join("foreign");

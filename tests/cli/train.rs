@@ -406,6 +406,19 @@ fn train_refuses_what_it_cannot_run_and_names_why() {
     std::fs::write(&bad, text.replace("batch_size = 2", "batch_size = 0")).unwrap();
     let e = stderr(&train(&data, &bad, &dir.join("bad"), &[]));
     assert!(e.contains("training.batch_size"), "{e}");
+    std::fs::write(
+        &bad,
+        text.replace(
+            "boundary_features = true",
+            "boundary_features = true\nboundary_horizon = -1.0",
+        ),
+    )
+    .unwrap();
+    let e = stderr(&train(&data, &bad, &dir.join("bad"), &[]));
+    assert!(
+        e.contains("model.boundary_horizon") && e.contains("-1"),
+        "{e}"
+    );
     // Boundary features on a dataset whose walls are particles.
     let walls = dir.join("walls");
     tiny_dataset_with(
@@ -634,6 +647,10 @@ fn every_lever_and_gpu_preset_parses_and_holds_what_its_name_says() {
             }
             if name.contains("walls") {
                 assert!(!c.model.boundary_features, "{at}");
+            }
+            if name.contains("horizon") {
+                assert!(c.model.boundary_features, "{at}");
+                assert!(c.model.boundary_horizon.is_some_and(|h| h > 1.0), "{at}");
             }
             assert_eq!(
                 TrainConfig::from_toml(&c.to_toml(), "stored").unwrap(),

@@ -262,6 +262,9 @@ def read_spec(weights: pathlib.Path) -> dict:
     config = spec["config"]
     if not config["boundary_features"]:
         sys.exit(f"{path}: geoelements always has boundary features; this model has none")
+    if config.get("boundary_horizon", 1.0) != 1.0:
+        sys.exit(f"{path}: geoelements clips the boundary features at the radius; this model's "
+                 f"boundary_horizon is {config['boundary_horizon']}")
     if (config["particle_types"] > 1) != (config["embedding_size"] > 0):
         sys.exit(f"{path}: geoelements embeds the particle type exactly when there are several")
     return spec

@@ -135,6 +135,8 @@ class GNS(nn.Module):
         self.velocities = model["input_velocities"]
         self.radius = float(metadata["default_connectivity_radius"])
         self.boundary = bool(model.get("boundary_features", True))
+        # Where the boundary features saturate, in multiples of the radius (phi's default 1).
+        self.boundary_scale = self.radius * float(model.get("boundary_horizon", 1.0))
         self.uses_embedding = types > 1 and model["embedding_size"] > 0
         node_features = self.velocities * dim + (2 * dim if self.boundary else 0)
         if self.uses_embedding:
@@ -163,8 +165,8 @@ class GNS(nn.Module):
         columns = [velocities.reshape(n, -1)]
         latest = positions[:, -1]
         if self.boundary:
-            columns.append(torch.clamp((latest - self.bounds[:, 0]) / self.radius, -1.0, 1.0))
-            columns.append(torch.clamp((self.bounds[:, 1] - latest) / self.radius, -1.0, 1.0))
+            columns.append(torch.clamp((latest - self.bounds[:, 0]) / self.boundary_scale, -1.0, 1.0))
+            columns.append(torch.clamp((self.bounds[:, 1] - latest) / self.boundary_scale, -1.0, 1.0))
         if self.uses_embedding:
             columns.append(self.embedding(types))
         displacement = (latest[senders] - latest[receivers]) / self.radius

@@ -41,6 +41,12 @@ pub struct GnsConfig {
     /// Whether nodes carry their clipped distances to the domain bounds (off for the model that
     /// sees the walls as particles, `1snb`).
     pub boundary_features: bool,
+    /// The distance, in multiples of `R`, at which a boundary feature saturates: a node's
+    /// distance to a wall is divided by `boundary_horizon · R` and clipped to `[−1, 1]`
+    /// (absent: 1, DeepMind's). A longer horizon lets a particle see a wall several frames
+    /// before it reaches it.
+    #[serde(default = "unit_horizon", skip_serializing_if = "is_unit_horizon")]
+    pub boundary_horizon: f64,
     /// `σ`, the standard deviation of the training noise (0 without noise); it widens the
     /// normalisation of velocities and accelerations as in DeepMind's code.
     pub noise_std: f64,
@@ -50,6 +56,18 @@ pub struct GnsConfig {
     /// What a rollout does with liquid predicted inside an obstacle (absent: [`Obstacles::Open`]).
     #[serde(default, skip_serializing_if = "Obstacles::is_open")]
     pub obstacles: Obstacles,
+}
+
+/// DeepMind's boundary horizon: the distance to a wall is clipped at `R`.
+fn unit_horizon() -> f64 {
+    1.0
+}
+
+/// Whether a horizon is the default one, left out of `model.json` so that the files of models
+/// made before the key existed stay as they were.
+#[allow(clippy::trivially_copy_pass_by_ref)] // serde's `skip_serializing_if` passes a reference
+fn is_unit_horizon(horizon: &f64) -> bool {
+    *horizon == 1.0
 }
 
 /// What a rollout does with a predicted position beyond the domain's walls (the model's
@@ -130,6 +148,8 @@ pub struct ConfigOverrides {
     pub connectivity_radius: Option<f64>,
     /// `boundary_features`.
     pub boundary_features: Option<bool>,
+    /// `boundary_horizon`, multiples of `R`.
+    pub boundary_horizon: Option<f64>,
     /// `noise_std` (σ).
     pub noise_std: Option<f64>,
 }
@@ -150,6 +170,7 @@ impl GnsConfig {
             particle_types: 2,
             embedding_size: 16,
             boundary_features: true,
+            boundary_horizon: 1.0,
             noise_std: 0.0,
             walls: Walls::Open,
             obstacles: Obstacles::Open,
@@ -189,6 +210,7 @@ impl GnsConfig {
         }
         config.connectivity_radius = o.connectivity_radius.unwrap_or(config.connectivity_radius);
         config.boundary_features = o.boundary_features.unwrap_or(config.boundary_features);
+        config.boundary_horizon = o.boundary_horizon.unwrap_or(config.boundary_horizon);
         config.noise_std = o.noise_std.unwrap_or(config.noise_std);
         config
     }
@@ -265,6 +287,15 @@ impl GnsConfig {
             if value > 4096 {
                 return fail(key, format!("{value} is larger than 4096"));
             }
+        }
+        if !(self.boundary_horizon.is_finite() && self.boundary_horizon > 0.0) {
+            return fail(
+                "boundary_horizon",
+                format!(
+                    "{} is not a positive number (multiples of the connectivity radius)",
+                    self.boundary_horizon
+                ),
+            );
         }
         if !(self.noise_std.is_finite() && self.noise_std >= 0.0) {
             return fail(

@@ -4,7 +4,8 @@
 //!
 //! Node features, in column order: the `C` normalised velocities oldest first (`v₀ₓ v₀ᵧ v₁ₓ …`),
 //! the distances of the latest position to the lower bounds per axis and then to the upper bounds
-//! per axis, divided by `R` and clipped to `[−1, 1]` (when the model has boundary features), and
+//! per axis, divided by `R` times the boundary horizon (1 unless the model says otherwise) and
+//! clipped to `[−1, 1]` (when the model has boundary features), and
 //! the particle-type embedding (with more than one type). Edge features: `(p_s − p_r) / R` per
 //! axis, then its norm.
 
@@ -58,13 +59,13 @@ pub(crate) fn previous_positions<B: Backend>(
         .reshape(&[shape[0], shape[2]])?)
 }
 
-/// Node features `[N, node_features]` of a batch (see the [module docs](self)).
+/// Node features `[N, node_features]` of a batch (see the [module docs](self)); the boundary
+/// distances are divided by `boundary_scale` (`R · boundary_horizon`), left out for `None`.
 pub(crate) fn node_features<B: Backend>(
     batch: &GraphBatch<B>,
     params: &Parameters<B>,
     normalisers: &Normalisers<B>,
-    radius: f32,
-    boundary_features: bool,
+    boundary_scale: Option<f32>,
     embedding: bool,
 ) -> Result<Tensor<B>, ModelError> {
     let positions = batch.positions();
@@ -75,10 +76,10 @@ pub(crate) fn node_features<B: Backend>(
         .binary(BinaryOp::Sub, &normalisers.vel_mean)?
         .binary(BinaryOp::Div, &normalisers.vel_scale)?;
     let mut columns = vec![velocities.reshape(&[n, (window - 1) * dim])?];
-    if boundary_features {
+    if let Some(scale) = boundary_scale {
         let latest = latest_positions(positions)?;
-        let to_lower = latest.binary(BinaryOp::Sub, &normalisers.lower)? / radius;
-        let to_upper = normalisers.upper.binary(BinaryOp::Sub, &latest)? / radius;
+        let to_lower = latest.binary(BinaryOp::Sub, &normalisers.lower)? / scale;
+        let to_upper = normalisers.upper.binary(BinaryOp::Sub, &latest)? / scale;
         columns.push(to_lower.clamp(-1.0, 1.0));
         columns.push(to_upper.clamp(-1.0, 1.0));
     }

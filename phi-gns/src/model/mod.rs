@@ -296,8 +296,9 @@ impl<B: GnsKernels> Gns<B> {
             batch,
             &self.params,
             &self.normalisers,
-            radius,
-            config.boundary_features,
+            config
+                .boundary_features
+                .then_some(radius * config.boundary_horizon as f32),
             config.uses_embedding(),
         )?;
         let latest = features::latest_positions(batch.positions())?;

@@ -65,6 +65,10 @@ pub struct ModelSection {
     /// Distances to the domain bounds in the node features. They must agree with the dataset:
     /// on for obstacles-only datasets, off for datasets whose walls are particles (`1snb`).
     pub boundary_features: bool,
+    /// Where the boundary features saturate, in multiples of `R` (absent: 1, DeepMind's; see
+    /// [`GnsConfig::boundary_horizon`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub boundary_horizon: Option<f64>,
     /// `σ` of the random-walk input noise (6.7e-4 for `1sn`, 0 for none).
     pub noise_std: f64,
     /// What the model's rollouts (screening among them) do at the domain's walls: `"open"`
@@ -470,6 +474,7 @@ impl TrainConfig {
             particle_types: metadata.particle_types.len().max(1),
             embedding_size: m.embedding_size,
             boundary_features: m.boundary_features,
+            boundary_horizon: m.boundary_horizon.unwrap_or(1.0),
             noise_std: m.noise_std,
             walls: m.walls,
             obstacles: crate::model::Obstacles::Open,

@@ -21,6 +21,7 @@ phi_core::backend_tests!(
     initial_parameters_are_the_same_on_every_backend,
     ten_message_passing_steps_match_the_host_reference,
     next_positions_and_targets_follow_the_acceleration,
+    a_longer_boundary_horizon_scales_the_wall_distances,
 );
 
 /// The model of the conformance test: the thesis' sizes, LayerNorms moved off ones and zeros.
@@ -256,4 +257,63 @@ fn next_positions_and_targets_follow_the_acceleration<B: GnsKernels>() {
     let target = model.target_acceleration(&batch, &next).unwrap().to_vec();
     let tolerance = roundoff / common::max_abs(&expected);
     assert_close(&target, &expected, tolerance, "target of a given frame");
+}
+
+/// With `boundary_horizon = h` a node reads its distance to a wall divided by `h · R` and
+/// clipped to `[−1, 1]`: the host reference with the same horizon agrees with every backend, the
+/// features of particles between `R` and `h · R` from a wall lie inside `(−1, 1)` where the
+/// default horizon clips them, and the same weights then predict something else.
+fn a_longer_boundary_horizon_scales_the_wall_distances<B: GnsKernels>() {
+    let device = B::default_device();
+    let mut config = common::config(16, 12, 2, 2);
+    let unit = common::spec(config.clone(), 5);
+    config.boundary_horizon = 4.0;
+    let spec = common::spec(config, 5);
+    let params = perturbed(&Parameters::<B>::init(&spec.config, spec.seed, &device), 5);
+    let model = Gns::new(spec, params.clone()).unwrap();
+    let default = Gns::new(unit, params).unwrap();
+    // A block from 1.5 R to about 3 R above the floor and right of the left wall.
+    let scene = liquid_over_obstacles(&mut Rng::new(9), 6, 6, 4, [0.145, 0.145], 6);
+    let batch = GraphBatch::from_host(&scene.window, &scene.types, model.spec(), &device).unwrap();
+
+    let r = model.spec().config.connectivity_radius;
+    let frames = model.spec().config.input_velocities + 1;
+    let host = HostGns::new(model.spec(), model.params());
+    let features = host.node_features(&scene.window_f64(), &scene.types);
+    let width = model.spec().config.node_features();
+    let mut inside = 0;
+    for (i, row) in features.chunks_exact(width).enumerate() {
+        for a in 0..2 {
+            let latest = scene.window_f64()[(i * frames + frames - 1) * 2 + a];
+            let expected = ((latest - 0.1) / (4.0 * r)).clamp(-1.0, 1.0);
+            assert!(
+                (row[10 + a] - expected).abs() < 1e-12,
+                "particle {i} axis {a}"
+            );
+            if (latest - 0.1) > r && expected < 1.0 {
+                inside += 1;
+            }
+        }
+    }
+    assert!(inside > 10, "only {inside} features between R and 4 R");
+
+    let edges = Edges {
+        senders: batch.graph().senders(),
+        receivers: batch.graph().receivers(),
+    };
+    let expected = host.normalised_acceleration(&scene.window_f64(), &scene.types, edges);
+    let got = model.normalised_acceleration(&batch).unwrap().to_vec();
+    assert_close(
+        &got,
+        &expected,
+        1e-4,
+        &format!("horizon 4 on {}", B::name()),
+    );
+    let other = default.normalised_acceleration(&batch).unwrap().to_vec();
+    let differs = got
+        .iter()
+        .zip(&other)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(differs > 1e-3, "horizon 4 and 1 predict alike ({differs})");
 }

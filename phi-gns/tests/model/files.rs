@@ -315,6 +315,11 @@ fn model_json_with_a_bad_value_names_the_key_and_the_value() {
     });
     config_error(&error, "normalisation.acc_std", &["-0.0001", "≥ 0"]);
 
+    let error = spec_error(&dir, |json| {
+        json["config"]["boundary_horizon"] = (-2.0).into()
+    });
+    config_error(&error, "config.boundary_horizon", &["-2", "positive"]);
+
     let error = spec_error(&dir, |json| json["config"]["dim"] = 4.into());
     config_error(&error, "config.dim", &["4", "2 or 3"]);
 

@@ -77,11 +77,13 @@ impl HostGns {
             }
             if config.boundary_features {
                 for a in 0..dim {
-                    let d = (p(frames - 1, a) - self.spec.bounds[a][0]) / r;
+                    let d =
+                        (p(frames - 1, a) - self.spec.bounds[a][0]) / (r * config.boundary_horizon);
                     features.push(d.clamp(-1.0, 1.0));
                 }
                 for a in 0..dim {
-                    let d = (self.spec.bounds[a][1] - p(frames - 1, a)) / r;
+                    let d =
+                        (self.spec.bounds[a][1] - p(frames - 1, a)) / (r * config.boundary_horizon);
                     features.push(d.clamp(-1.0, 1.0));
                 }
             }

@@ -220,6 +220,7 @@ class Model:
         embedding: Optional[int] = None,
         radius: Optional[float] = None,
         boundary_features: Optional[bool] = None,
+        boundary_horizon: Optional[float] = None,
         noise_std: Optional[float] = None,
         backend: str = "ndarray",
     ) -> "Model":
