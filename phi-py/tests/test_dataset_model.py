@@ -177,6 +177,15 @@ def test_model_init_errors(dataset_dir, tmp_path):
         phi_rs.Model.init(tmp_path / "no-data")
     with pytest.raises(phi_rs.ModelError, match="Model.init: latent"):
         phi_rs.Model.init(dataset_dir, latent=0)
+    with pytest.raises(phi_rs.ModelError, match="Model.init: boundary_horizon"):
+        phi_rs.Model.init(dataset_dir, boundary_horizon=0.0)
+
+
+def test_model_init_boundary_horizon(dataset_dir):
+    default = phi_rs.Model.init(dataset_dir, **INIT_OPTIONS)
+    assert "boundary_horizon" not in default.spec_dict["config"]
+    far = phi_rs.Model.init(dataset_dir, boundary_horizon=4.0, **INIT_OPTIONS)
+    assert far.spec_dict["config"]["boundary_horizon"] == 4.0
 
 
 def test_predict_is_the_first_step_of_rollout(model_dir, dataset_dir, cli_rollout):
