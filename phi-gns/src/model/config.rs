@@ -58,16 +58,18 @@ pub struct GnsConfig {
     pub obstacles: Obstacles,
 }
 
-/// DeepMind's boundary horizon: the distance to a wall is clipped at `R`.
+/// DeepMind's boundary horizon, the default: the distance to a wall is clipped at `R`.
+pub(crate) const DEFAULT_BOUNDARY_HORIZON: f64 = 1.0;
+
 fn unit_horizon() -> f64 {
-    1.0
+    DEFAULT_BOUNDARY_HORIZON
 }
 
 /// Whether a horizon is the default one, left out of `model.json` so that the files of models
 /// made before the key existed stay as they were.
 #[allow(clippy::trivially_copy_pass_by_ref)] // serde's `skip_serializing_if` passes a reference
 fn is_unit_horizon(horizon: &f64) -> bool {
-    *horizon == 1.0
+    *horizon == DEFAULT_BOUNDARY_HORIZON
 }
 
 /// What a rollout does with a predicted position beyond the domain's walls (the model's
@@ -170,7 +172,7 @@ impl GnsConfig {
             particle_types: 2,
             embedding_size: 16,
             boundary_features: true,
-            boundary_horizon: 1.0,
+            boundary_horizon: DEFAULT_BOUNDARY_HORIZON,
             noise_std: 0.0,
             walls: Walls::Open,
             obstacles: Obstacles::Open,

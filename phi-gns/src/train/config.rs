@@ -474,7 +474,9 @@ impl TrainConfig {
             particle_types: metadata.particle_types.len().max(1),
             embedding_size: m.embedding_size,
             boundary_features: m.boundary_features,
-            boundary_horizon: m.boundary_horizon.unwrap_or(1.0),
+            boundary_horizon: m
+                .boundary_horizon
+                .unwrap_or(crate::model::config::DEFAULT_BOUNDARY_HORIZON),
             noise_std: m.noise_std,
             walls: m.walls,
             obstacles: crate::model::Obstacles::Open,
