@@ -75,9 +75,9 @@ def main():
     for key in sorted(blocks):
         pairs = blocks[key]
         change, lower, n = summary(pairs)
-        print(f"{key * args.block + 1}-{(key + 1) * args.block}\t{change:+.1f} %\t{lower} of {n}")
+        print(f"{key * args.block + 1}-{(key + 1) * args.block}\t{change:+.2f} %\t{lower} of {n}")
     change, lower, n = summary([(a[s], b[s]) for s in steps])
-    print(f"{steps[0]}-{steps[-1]}\t{change:+.1f} %\t{lower} of {n}")
+    print(f"{steps[0]}-{steps[-1]}\t{change:+.2f} %\t{lower} of {n}")
 
 
 if __name__ == "__main__":
