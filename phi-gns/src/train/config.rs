@@ -98,12 +98,17 @@ pub struct TrainingSection {
     /// A row of `train.csv` (the mean loss since the last row) every this many steps.
     pub log_every: u64,
     /// How a particle's error in normalised acceleration is scored: `"mse"` (the thesis's
-    /// squared error, the default) or `"huber"` (squared within `huber_delta`, linear beyond).
+    /// squared error, the default), `"huber"` (squared within `huber_delta`, linear beyond) or
+    /// `"relative"` (squared, over the size of the particle's target acceleration floored at
+    /// `relative_scale`: [`ErrorNorm::Relative`]).
     #[serde(default, skip_serializing_if = "LossKind::is_mse")]
     pub loss: LossKind,
     /// `δ` of the Huber loss in normalised units (only with `loss = "huber"`; default 1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub huber_delta: Option<f64>,
+    /// `s` of the relative loss in normalised units (only with `loss = "relative"`; default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub relative_scale: Option<f64>,
     /// Mirror augmentation: each example of a batch is reflected across the vertical mid-plane
     /// of the model's bounds (`x ↦ lower + upper − x` on the first axis; gravity is along
     /// the last) with probability ½, which maps a scene to a scene (default off).
@@ -137,6 +142,8 @@ pub enum LossKind {
     Mse,
     /// Huber's loss (times two), quadratic within `huber_delta`.
     Huber,
+    /// The squared error relative to the target's size, floored at `relative_scale`.
+    Relative,
 }
 
 impl LossKind {
@@ -152,6 +159,9 @@ impl TrainingSection {
             LossKind::Mse => ErrorNorm::Squared,
             LossKind::Huber => ErrorNorm::Huber {
                 delta: self.huber_delta.unwrap_or(1.0) as f32,
+            },
+            LossKind::Relative => ErrorNorm::Relative {
+                scale: self.relative_scale.unwrap_or(1.0) as f32,
             },
         }
     }
@@ -332,6 +342,17 @@ impl TrainConfig {
             }
             if !(delta.is_finite() && delta > 0.0) {
                 return fail("training.huber_delta", format!("{delta} is not > 0"));
+            }
+        }
+        if let Some(scale) = t.relative_scale {
+            if t.loss != LossKind::Relative {
+                return fail(
+                    "training.relative_scale",
+                    "is only used with training.loss = \"relative\"".into(),
+                );
+            }
+            if !(scale.is_finite() && scale > 0.0) {
+                return fail("training.relative_scale", format!("{scale} is not > 0"));
             }
         }
         if let Some(d) = t.ema_decay
@@ -550,7 +571,7 @@ mod tests {
     }
 
     #[test]
-    fn the_loss_defaults_to_the_squared_error_and_huber_takes_a_delta() {
+    fn the_loss_defaults_to_the_squared_error_and_huber_and_relative_take_a_size() {
         let text = preset();
         let plain = TrainConfig::from_toml(&text, "preset.toml").unwrap();
         assert_eq!(plain.training.error_norm(), ErrorNorm::Squared);
@@ -577,6 +598,26 @@ mod tests {
         );
         let e = refusal(&text.replace("log_every = 100", "log_every = 100\nloss = \"l1\""));
         assert!(e.contains("l1"), "{e}");
+        let relative = text.replace("log_every = 100", "log_every = 100\nloss = \"relative\"");
+        let c = TrainConfig::from_toml(&relative, "preset.toml").unwrap();
+        assert_eq!(c.training.error_norm(), ErrorNorm::Relative { scale: 1.0 });
+        let scale = relative.replace(
+            "loss = \"relative\"",
+            "loss = \"relative\"\nrelative_scale = 0.1",
+        );
+        let c = TrainConfig::from_toml(&scale, "preset.toml").unwrap();
+        assert_eq!(c.training.error_norm(), ErrorNorm::Relative { scale: 0.1 });
+        assert_eq!(TrainConfig::from_toml(&c.to_toml(), "stored").unwrap(), c);
+        let e = refusal(&delta.replace("huber_delta = 2.5", "relative_scale = 0.1"));
+        assert!(
+            e.contains("training.relative_scale") && e.contains("relative"),
+            "{e}"
+        );
+        let e = refusal(&scale.replace("relative_scale = 0.1", "relative_scale = 0.0"));
+        assert!(
+            e.contains("training.relative_scale") && e.contains("is not > 0"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -19,6 +19,15 @@ pub enum ErrorNorm {
         /// `δ`, in normalised units.
         delta: f32,
     },
+    /// `s² |r|² / (|t|² + s²)` per particle, `r` its error and `t` its target acceleration
+    /// (normalised, summed over components): the squared error relative to the size of the
+    /// particle's own acceleration, floored at `s`. A particle accelerating by much more than `s`
+    /// (a wall impact) counts its relative error; one at rest counts its error as the squared
+    /// error would. The weight is data: no gradient flows through the target's size.
+    Relative {
+        /// `s`, in normalised units.
+        scale: f32,
+    },
 }
 
 /// `1.0` for particles that count in the loss, `0.0` for kinematic ones: `[N]`.
@@ -114,7 +123,7 @@ pub(crate) fn squared_error<B: phi_core::Backend>(
     masked_error(predicted, target, mask, counted, ErrorNorm::Squared)
 }
 
-/// `Σ_i mask_i Σ_a e(predicted_ia − target_ia) / counted`, `e` the error of `norm`.
+/// `Σ_i mask_i e_i / counted`, `e_i` particle `i`'s error of `norm` (summed over components).
 pub(crate) fn masked_error<B: phi_core::Backend>(
     predicted: &Tensor<B>,
     target: &Tensor<B>,
@@ -123,15 +132,23 @@ pub(crate) fn masked_error<B: phi_core::Backend>(
     norm: ErrorNorm,
 ) -> Result<Tensor<B>, ModelError> {
     let residual = predicted.binary(BinaryOp::Sub, target)?;
-    let per_component = match norm {
-        ErrorNorm::Squared => residual.square(),
+    let per_particle = match norm {
+        ErrorNorm::Squared => residual.square().sum_axis(1)?,
         ErrorNorm::Huber { delta } => {
             // q = min(|r|, δ): q² + 2δ(|r| − q) is r² inside δ and 2δ|r| − δ² outside.
             let size = residual.abs();
             let inner = size.clamp(0.0, delta);
-            inner.square() + size.binary(BinaryOp::Sub, &inner)? * (2.0 * delta)
+            (inner.square() + size.binary(BinaryOp::Sub, &inner)? * (2.0 * delta)).sum_axis(1)?
+        }
+        ErrorNorm::Relative { scale } => {
+            let floor = scale * scale;
+            let size = target.detach().square().sum_axis(1)?;
+            let weight = floor / (size + floor);
+            residual
+                .square()
+                .sum_axis(1)?
+                .binary(BinaryOp::Mul, &weight)?
         }
     };
-    let per_particle = per_component.sum_axis(1)?;
     Ok(per_particle.binary(BinaryOp::Mul, mask)?.sum() / counted)
 }

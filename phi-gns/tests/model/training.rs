@@ -13,11 +13,18 @@ use super::common::{Rng, config, liquid_over_obstacles, perturbed, spec};
 
 phi_core::backend_tests!(
     loss_is_the_masked_mean_of_squared_errors,
-    huber_loss_is_quadratic_inside_delta_and_linear_outside
+    huber_loss_is_quadratic_inside_delta_and_linear_outside,
+    relative_loss_divides_each_error_by_its_target_size
 );
 mod gradient {
-    use super::loss_gradient_in_the_decoder_bias_is_the_mean_error;
-    phi_core::autodiff_backend_tests!(loss_gradient_in_the_decoder_bias_is_the_mean_error);
+    use super::{
+        loss_gradient_in_the_decoder_bias_is_the_mean_error,
+        relative_loss_gradient_is_the_weighted_mean_error,
+    };
+    phi_core::autodiff_backend_tests!(
+        loss_gradient_in_the_decoder_bias_is_the_mean_error,
+        relative_loss_gradient_is_the_weighted_mean_error
+    );
 }
 
 #[test]
@@ -265,6 +272,125 @@ fn huber_loss_is_quadratic_inside_delta_and_linear_outside<B: GnsKernels>() {
             .unwrap(),
     );
     assert!((same - squared).abs() <= 1e-6 * squared, "{}", B::name());
+}
+
+/// The host's relative loss: `Σ_i s² |r_i|² / (|t_i|² + s²)` over the counted particles,
+/// divided by their number, and each particle's weight `s² / (|t_i|² + s²)`.
+fn host_relative(
+    predicted: &[f32],
+    target: &[f32],
+    counted: &[usize],
+    scale: f64,
+) -> (f64, Vec<f64>) {
+    let floor = scale * scale;
+    let mut weights = vec![0.0; predicted.len() / 2];
+    let mut sum = 0.0;
+    for &i in counted {
+        let (mut error, mut size) = (0.0, 0.0);
+        for k in 0..2 {
+            let t = f64::from(target[i * 2 + k]);
+            let r = f64::from(predicted[i * 2 + k]) - t;
+            error += r * r;
+            size += t * t;
+        }
+        weights[i] = floor / (size + floor);
+        sum += weights[i] * error;
+    }
+    (sum / counted.len() as f64, weights)
+}
+
+fn relative_loss_divides_each_error_by_its_target_size<B: GnsKernels>() {
+    let p = problem::<B>();
+    let device = B::default_device();
+    let n = p.types.len();
+    let next = Tensor::<B>::from_vec(p.next.clone(), &[n, 2], &device).unwrap();
+    let mask = non_kinematic_mask::<B>(&p.types, &[OBSTACLE], &device).unwrap();
+    let predicted = p.model.normalised_acceleration(&p.batch).unwrap().to_vec();
+    let target = p
+        .model
+        .target_acceleration(&p.batch, &next)
+        .unwrap()
+        .to_vec();
+    let counted: Vec<usize> = (0..n).filter(|&i| p.types[i] != OBSTACLE).collect();
+    let loss = |norm| {
+        f64::from(
+            one_step_loss(&p.model, &p.batch, &next, &mask, norm)
+                .unwrap()
+                .to_scalar()
+                .unwrap(),
+        )
+    };
+    // The median target size as the scale: the weights span both sides of ½.
+    let mut sizes: Vec<f64> = counted
+        .iter()
+        .map(|&i| f64::from(target[i * 2]).hypot(f64::from(target[i * 2 + 1])))
+        .collect();
+    sizes.sort_by(f64::total_cmp);
+    let scale = sizes[sizes.len() / 2];
+    let (expected, weights) = host_relative(&predicted, &target, &counted, scale);
+    let lightest = counted.iter().map(|&i| weights[i]).fold(1.0, f64::min);
+    assert!(lightest < 0.5, "{}: weights down to {lightest}", B::name());
+    let got = loss(ErrorNorm::Relative {
+        scale: scale as f32,
+    });
+    assert!(
+        (got - expected).abs() <= 1e-5 * expected,
+        "{}: relative loss {got}, host {expected}",
+        B::name()
+    );
+    // Every weight is below 1: the relative loss is below the squared error, and a scale far
+    // above every target is the squared error.
+    let squared = loss(ErrorNorm::Squared);
+    assert!(got < squared, "{}: {got} against {squared}", B::name());
+    let wide = loss(ErrorNorm::Relative {
+        scale: (sizes[sizes.len() - 1] * 1e3) as f32,
+    });
+    assert!(
+        (wide - squared).abs() <= 1e-5 * squared,
+        "{}: {wide} against {squared}",
+        B::name()
+    );
+}
+
+fn relative_loss_gradient_is_the_weighted_mean_error<B: GnsKernels + AutodiffBackend>() {
+    let p = problem::<B>();
+    let device = B::default_device();
+    let n = p.types.len();
+    let leaves = p.model.params().map(|_, t| t.require_grad());
+    let model = p.model.with_params(leaves.clone()).unwrap();
+    let next = Tensor::<B>::from_vec(p.next.clone(), &[n, 2], &device).unwrap();
+    let mask = non_kinematic_mask::<B>(&p.types, &[OBSTACLE], &device).unwrap();
+    let predicted = model
+        .normalised_acceleration(&p.batch)
+        .unwrap()
+        .detach()
+        .to_vec();
+    let target = model.target_acceleration(&p.batch, &next).unwrap().to_vec();
+    let counted: Vec<usize> = (0..n).filter(|&i| p.types[i] != OBSTACLE).collect();
+    let scale = 0.5;
+    let (_, weights) = host_relative(&predicted, &target, &counted, scale);
+    let norm = ErrorNorm::Relative {
+        scale: scale as f32,
+    };
+    let loss = one_step_loss(&model, &p.batch, &next, &mask, norm).unwrap();
+    let bias = leaves.get("decoder.2.bias");
+    let gradient = loss.gradients(&[bias]).unwrap()[0].to_vec();
+    // The weights are data: ∂L/∂b_k is (2 / counted) Σ_i w_i (predicted_ik − target_ik).
+    for k in 0..2 {
+        let expected: f64 = counted
+            .iter()
+            .map(|&i| {
+                2.0 * weights[i] * (f64::from(predicted[i * 2 + k]) - f64::from(target[i * 2 + k]))
+            })
+            .sum::<f64>()
+            / counted.len() as f64;
+        let got = f64::from(gradient[k]);
+        assert!(
+            (got - expected).abs() <= 1e-5 * expected.abs().max(1e-3),
+            "{}: ∂L/∂b_{k} = {got}, closed form {expected}",
+            B::name()
+        );
+    }
 }
 
 fn loss_gradient_in_the_decoder_bias_is_the_mean_error<B: GnsKernels + AutodiffBackend>() {
