@@ -16,7 +16,8 @@ with DeepMind's recipe, written independently of phi:
 - the squared error of the normalised acceleration, summed over dimensions and averaged over the
   non-kinematic particles; Adam; the learning rate `(initial - final) * 0.1^(step / decay_steps)
   + final`, with the optional linear warm-up and global gradient-norm clipping of phi's
-  configuration.
+  configuration. A configuration that asks for a `phi train` option this trainer lacks (the
+  multi-step loss, another loss, mirroring, pushforward) is refused, naming the key.
 
 Its layout (parameter names and shapes) is phi's, so `--init-from MODEL_DIR` starts from the
 weights of a phi model directory (`model.safetensors`), and both trainers can start from the same
@@ -303,6 +304,22 @@ def screen(model, dataset, trajectories, stride, rollout_steps, device):
 # ---------------------------------------------------------------------------------------------
 
 
+def refuse_unimplemented(config, path):
+    """Exits naming the key when the configuration asks for a training option of `phi train` that
+    this trainer does not implement (it would otherwise train DeepMind's one-step recipe instead)."""
+    training = config.get("training", {})
+    unimplemented = [
+        ("training.extra_steps", training.get("extra_steps", 0) != 0),
+        ("training.loss", training.get("loss", "mse") != "mse"),
+        ("training.mirror", bool(training.get("mirror", False))),
+        ("training.pushforward", "pushforward" in training),
+    ]
+    for key, asked in unimplemented:
+        if asked:
+            sys.exit(f"error: {path}: {key} is set, and this trainer implements only the one-step "
+                     "squared error without mirroring or pushforward")
+
+
 def build(args):
     try:
         config = tomllib.loads(pathlib.Path(args.config).read_text())
@@ -458,6 +475,7 @@ def main():
     out.mkdir(parents=True, exist_ok=True)
 
     config, device, train, model = build(args)
+    refuse_unimplemented(config, args.config)
     training, optimizer_config = config["training"], config["optimizer"]
     screening = config.get("screening", {})
     steps = args.steps or training["steps"]
