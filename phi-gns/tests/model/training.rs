@@ -204,7 +204,18 @@ fn loss_is_the_masked_mean_of_squared_errors<B: GnsKernels>() {
     assert!(one_step_loss(&p.model, &p.batch, &next, &none, ErrorNorm::Squared).is_err());
 }
 
-fn huber_loss_is_quadratic_inside_delta_and_linear_outside<B: GnsKernels>() {
+/// [`problem`] with its target as a tensor, the loss mask, the host's predicted and target
+/// normalised accelerations and the indices of the particles that count.
+struct Scored<B: GnsKernels> {
+    p: Problem<B>,
+    next: Tensor<B>,
+    mask: Tensor<B>,
+    predicted: Vec<f32>,
+    target: Vec<f32>,
+    counted: Vec<usize>,
+}
+
+fn scored<B: GnsKernels>() -> Scored<B> {
     let p = problem::<B>();
     let device = B::default_device();
     let n = p.types.len();
@@ -217,6 +228,25 @@ fn huber_loss_is_quadratic_inside_delta_and_linear_outside<B: GnsKernels>() {
         .unwrap()
         .to_vec();
     let counted: Vec<usize> = (0..n).filter(|&i| p.types[i] != OBSTACLE).collect();
+    Scored {
+        p,
+        next,
+        mask,
+        predicted,
+        target,
+        counted,
+    }
+}
+
+fn huber_loss_is_quadratic_inside_delta_and_linear_outside<B: GnsKernels>() {
+    let Scored {
+        p,
+        next,
+        mask,
+        predicted,
+        target,
+        counted,
+    } = scored::<B>();
     let mut sizes: Vec<f64> = counted
         .iter()
         .flat_map(|&i| (0..2).map(move |k| i * 2 + k))
@@ -300,18 +330,14 @@ fn host_relative(
 }
 
 fn relative_loss_divides_each_error_by_its_target_size<B: GnsKernels>() {
-    let p = problem::<B>();
-    let device = B::default_device();
-    let n = p.types.len();
-    let next = Tensor::<B>::from_vec(p.next.clone(), &[n, 2], &device).unwrap();
-    let mask = non_kinematic_mask::<B>(&p.types, &[OBSTACLE], &device).unwrap();
-    let predicted = p.model.normalised_acceleration(&p.batch).unwrap().to_vec();
-    let target = p
-        .model
-        .target_acceleration(&p.batch, &next)
-        .unwrap()
-        .to_vec();
-    let counted: Vec<usize> = (0..n).filter(|&i| p.types[i] != OBSTACLE).collect();
+    let Scored {
+        p,
+        next,
+        mask,
+        predicted,
+        target,
+        counted,
+    } = scored::<B>();
     let loss = |norm| {
         f64::from(
             one_step_loss(&p.model, &p.batch, &next, &mask, norm)
