@@ -238,19 +238,25 @@ fn scored<B: GnsKernels>() -> Scored<B> {
     }
 }
 
+impl<B: GnsKernels> Scored<B> {
+    /// The one-step loss of the problem under `norm`.
+    fn loss(&self, norm: ErrorNorm) -> f64 {
+        f64::from(
+            one_step_loss(&self.p.model, &self.p.batch, &self.next, &self.mask, norm)
+                .unwrap()
+                .to_scalar()
+                .unwrap(),
+        )
+    }
+}
+
 fn huber_loss_is_quadratic_inside_delta_and_linear_outside<B: GnsKernels>() {
-    let Scored {
-        p,
-        next,
-        mask,
-        predicted,
-        target,
-        counted,
-    } = scored::<B>();
-    let mut sizes: Vec<f64> = counted
+    let s = scored::<B>();
+    let mut sizes: Vec<f64> = s
+        .counted
         .iter()
         .flat_map(|&i| (0..2).map(move |k| i * 2 + k))
-        .map(|j| (f64::from(predicted[j]) - f64::from(target[j])).abs())
+        .map(|j| (f64::from(s.predicted[j]) - f64::from(s.target[j])).abs())
         .collect();
     sizes.sort_by(f64::total_cmp);
     // δ at the median error: half the components on each branch.
@@ -265,27 +271,17 @@ fn huber_loss_is_quadratic_inside_delta_and_linear_outside<B: GnsKernels>() {
             }
         })
         .sum::<f64>()
-        / counted.len() as f64;
+        / s.counted.len() as f64;
     let huber = ErrorNorm::Huber {
         delta: delta as f32,
     };
-    let got = f64::from(
-        one_step_loss(&p.model, &p.batch, &next, &mask, huber)
-            .unwrap()
-            .to_scalar()
-            .unwrap(),
-    );
+    let got = s.loss(huber);
     assert!(
         (got - expected).abs() <= 1e-5 * expected,
         "{}: Huber loss {got}, host {expected}",
         B::name()
     );
-    let squared = f64::from(
-        one_step_loss(&p.model, &p.batch, &next, &mask, ErrorNorm::Squared)
-            .unwrap()
-            .to_scalar()
-            .unwrap(),
-    );
+    let squared = s.loss(ErrorNorm::Squared);
     assert!(
         got < squared,
         "{}: outliers cost less than squared",
@@ -295,12 +291,7 @@ fn huber_loss_is_quadratic_inside_delta_and_linear_outside<B: GnsKernels>() {
     let wide = ErrorNorm::Huber {
         delta: (sizes[sizes.len() - 1] * 2.0) as f32,
     };
-    let same = f64::from(
-        one_step_loss(&p.model, &p.batch, &next, &mask, wide)
-            .unwrap()
-            .to_scalar()
-            .unwrap(),
-    );
+    let same = s.loss(wide);
     assert!((same - squared).abs() <= 1e-6 * squared, "{}", B::name());
 }
 
@@ -330,33 +321,19 @@ fn host_relative(
 }
 
 fn relative_loss_divides_each_error_by_its_target_size<B: GnsKernels>() {
-    let Scored {
-        p,
-        next,
-        mask,
-        predicted,
-        target,
-        counted,
-    } = scored::<B>();
-    let loss = |norm| {
-        f64::from(
-            one_step_loss(&p.model, &p.batch, &next, &mask, norm)
-                .unwrap()
-                .to_scalar()
-                .unwrap(),
-        )
-    };
+    let s = scored::<B>();
     // The median target size as the scale: the weights span both sides of ½.
-    let mut sizes: Vec<f64> = counted
+    let mut sizes: Vec<f64> = s
+        .counted
         .iter()
-        .map(|&i| f64::from(target[i * 2]).hypot(f64::from(target[i * 2 + 1])))
+        .map(|&i| f64::from(s.target[i * 2]).hypot(f64::from(s.target[i * 2 + 1])))
         .collect();
     sizes.sort_by(f64::total_cmp);
     let scale = sizes[sizes.len() / 2];
-    let (expected, weights) = host_relative(&predicted, &target, &counted, scale);
-    let lightest = counted.iter().map(|&i| weights[i]).fold(1.0, f64::min);
+    let (expected, weights) = host_relative(&s.predicted, &s.target, &s.counted, scale);
+    let lightest = s.counted.iter().map(|&i| weights[i]).fold(1.0, f64::min);
     assert!(lightest < 0.5, "{}: weights down to {lightest}", B::name());
-    let got = loss(ErrorNorm::Relative {
+    let got = s.loss(ErrorNorm::Relative {
         scale: scale as f32,
     });
     assert!(
@@ -366,9 +343,9 @@ fn relative_loss_divides_each_error_by_its_target_size<B: GnsKernels>() {
     );
     // Every weight is below 1: the relative loss is below the squared error, and a scale far
     // above every target is the squared error.
-    let squared = loss(ErrorNorm::Squared);
+    let squared = s.loss(ErrorNorm::Squared);
     assert!(got < squared, "{}: {got} against {squared}", B::name());
-    let wide = loss(ErrorNorm::Relative {
+    let wide = s.loss(ErrorNorm::Relative {
         scale: (sizes[sizes.len() - 1] * 1e3) as f32,
     });
     assert!(
