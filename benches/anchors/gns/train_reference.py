@@ -17,7 +17,8 @@ with DeepMind's recipe, written independently of phi:
   non-kinematic particles; Adam; the learning rate `(initial - final) * 0.1^(step / decay_steps)
   + final`, with the optional linear warm-up and global gradient-norm clipping of phi's
   configuration. A configuration that asks for a `phi train` option this trainer lacks (the
-  multi-step loss, another loss, mirroring, pushforward) is refused, naming the key.
+  multi-step loss, another loss, mirroring, pushforward, obstacle weights) is refused, naming
+  the key.
 
 Its layout (parameter names and shapes) is phi's, so `--init-from MODEL_DIR` starts from the
 weights of a phi model directory (`model.safetensors`), and both trainers can start from the same
@@ -313,11 +314,12 @@ def refuse_unimplemented(config, path):
         ("training.loss", training.get("loss", "mse") != "mse"),
         ("training.mirror", bool(training.get("mirror", False))),
         ("training.pushforward", "pushforward" in training),
+        ("training.obstacle_weight", training.get("obstacle_weight", 1.0) != 1.0),
     ]
     for key, asked in unimplemented:
         if asked:
             sys.exit(f"error: {path}: {key} is set, and this trainer implements only the one-step "
-                     "squared error without mirroring or pushforward")
+                     "squared error without mirroring, pushforward or obstacle weights")
 
 
 def build(args):

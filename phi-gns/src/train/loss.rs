@@ -52,6 +52,49 @@ pub fn non_kinematic_mask<B: phi_core::Backend>(
     Ok(Tensor::from_vec(mask, &[particle_type.len()], device)?)
 }
 
+/// The loss weights of one graph, `[N]`: 0 for kinematic particles, `weight` for a counted
+/// particle with a kinematic particle (an obstacle) within `radius` in `latest` (`[N, dim]`
+/// positions), 1 for the other counted ones. With these as the mask, the losses of this module
+/// are the weighted mean of the particles' errors; `weight = 1` gives
+/// [`non_kinematic_mask`]'s values.
+///
+/// Brute force over the pairs of counted and kinematic particles: a training graph has ~10³
+/// particles and ~10² obstacle particles.
+pub fn obstacle_weights(
+    latest: &[f32],
+    dim: usize,
+    particle_type: &[i64],
+    kinematic_types: &[i64],
+    radius: f32,
+    weight: f32,
+) -> Vec<f32> {
+    let kinematic: Vec<&[f32]> = particle_type
+        .iter()
+        .enumerate()
+        .filter(|(_, t)| kinematic_types.contains(t))
+        .map(|(i, _)| &latest[i * dim..(i + 1) * dim])
+        .collect();
+    let reach = radius * radius;
+    particle_type
+        .iter()
+        .enumerate()
+        .map(|(i, t)| {
+            if kinematic_types.contains(t) {
+                return 0.0;
+            }
+            let p = &latest[i * dim..(i + 1) * dim];
+            let near = kinematic.iter().any(|q| {
+                p.iter()
+                    .zip(q.iter())
+                    .map(|(a, b)| (a - b) * (a - b))
+                    .sum::<f32>()
+                    <= reach
+            });
+            if near { weight } else { 1.0 }
+        })
+        .collect()
+}
+
 /// The error (squared, or as `norm` says) between the predicted and the target normalised
 /// acceleration, summed over dimensions and averaged over the particles of `mask` (`[N]`, 1 where a particle counts): a
 /// one-element tensor, differentiable in the model's parameters and the batch's positions. The

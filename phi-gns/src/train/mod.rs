@@ -41,7 +41,7 @@ pub use adam::{Adam, AdamConfig, LearningRate};
 pub use checkpoint::BEST_DIR;
 pub use config::TrainConfig;
 pub use error::TrainError;
-pub use loss::{ErrorNorm, acceleration_loss, non_kinematic_mask, one_step_loss};
+pub use loss::{ErrorNorm, acceleration_loss, non_kinematic_mask, obstacle_weights, one_step_loss};
 pub use multistep::multi_step_loss;
 pub use noise::{RandomWalkNoise, random_walk_noise};
 pub use pushforward::{Pushforward, push_forward, pushforward_loss};

@@ -17,8 +17,8 @@ use super::config::TrainConfig;
 use super::rng::{RngStream, step_rng};
 use super::stream::HostBatch;
 use super::{
-    Adam, ErrorNorm, multi_step_loss, non_kinematic_mask, one_step_loss, pushforward_loss,
-    random_walk_noise,
+    Adam, ErrorNorm, multi_step_loss, non_kinematic_mask, obstacle_weights, one_step_loss,
+    pushforward_loss, random_walk_noise,
 };
 use crate::model::{Gns, GnsKernels, GraphBatch, ModelError};
 
@@ -68,20 +68,21 @@ fn parallel_graphs_gradients<B: AutodiffBackend + GnsKernels>(
     host: &HostInputs<'_>,
     device: &B::Device,
 ) -> Result<LossAndGradients<B>, ModelError> {
-    let kinematic = &model.spec().kinematic_types;
-    let counted: Vec<usize> = host
+    // Each graph's share of the batch's weighted mean: its particles' loss weights over the
+    // batch's (counts of counted particles, exact in f32, without obstacle weights).
+    let counted: Vec<f32> = host
         .examples
         .iter()
-        .map(|e| e.types.iter().filter(|t| !kinematic.contains(t)).count())
+        .map(|e| host.loss_weights(e, model).iter().sum())
         .collect();
-    let total: usize = counted.iter().sum();
+    let total: f32 = counted.iter().sum();
     let jobs: Vec<(Gns<B>, &HostExample<'_>, f32)> = host
         .examples
         .iter()
         .zip(&counted)
         // An example with no counted particle adds nothing to the loss (and would be 0/0).
-        .filter(|(_, count)| **count > 0)
-        .map(|(example, &count)| (model.clone(), example, count as f32 / total as f32))
+        .filter(|(_, count)| **count > 0.0)
+        .map(|(example, &count)| (model.clone(), example, count / total))
         .collect();
     if jobs.is_empty() {
         // Nothing counts: the batch's own loss reports it.
@@ -191,6 +192,8 @@ struct HostInputs<'a> {
     truth_frames: usize,
     pushforward: bool,
     norm: ErrorNorm,
+    /// `training.obstacle_weight`, when set.
+    obstacle_weight: Option<f32>,
 }
 
 impl<'a> HostInputs<'a> {
@@ -277,7 +280,40 @@ impl<'a> HostInputs<'a> {
             truth_frames,
             pushforward: unrolls > 0,
             norm: config.training.error_norm(),
+            obstacle_weight: config.training.obstacle_weight.map(|w| w as f32),
         }
+    }
+
+    /// The weight of each particle of `example` in the loss: 0 for kinematic particles, 1 for
+    /// the counted ones, or with `training.obstacle_weight` that weight for the counted particles
+    /// with an obstacle within the connectivity radius in the latest input frame
+    /// ([`obstacle_weights`]).
+    fn loss_weights<B: GnsKernels>(&self, example: &HostExample<'_>, model: &Gns<B>) -> Vec<f32> {
+        let spec = model.spec();
+        let kinematic = &spec.kinematic_types;
+        let Some(weight) = self.obstacle_weight else {
+            return example
+                .types
+                .iter()
+                .map(|t| if kinematic.contains(t) { 0.0 } else { 1.0 })
+                .collect();
+        };
+        // The latest input frame: the last of each particle's C + 1 window frames.
+        let (frames, dim) = (spec.config.input_velocities + 1, spec.config.dim);
+        let latest: Vec<f32> = example
+            .window
+            .chunks_exact(frames * dim)
+            .flat_map(|particle| &particle[(frames - 1) * dim..])
+            .copied()
+            .collect();
+        obstacle_weights(
+            &latest,
+            dim,
+            example.types,
+            kinematic,
+            spec.config.connectivity_radius as f32,
+            weight,
+        )
     }
 
     /// The inputs of the loss of `examples` (a range of [`Self::examples`]) as one graph.
@@ -306,7 +342,16 @@ impl<'a> HostInputs<'a> {
                 Tensor::from_vec(truth, &[particles, frames, dim], device)
             })
             .transpose()?;
-        let mask = non_kinematic_mask::<B>(&types, &spec.kinematic_types, device)?;
+        let mask = match self.obstacle_weight {
+            None => non_kinematic_mask::<B>(&types, &spec.kinematic_types, device)?,
+            Some(_) => {
+                let weights = examples
+                    .iter()
+                    .flat_map(|e| self.loss_weights(e, model))
+                    .collect();
+                Tensor::from_vec(weights, &[particles], device)?
+            }
+        };
         Ok(StepInputs {
             batch,
             next,
@@ -484,8 +529,16 @@ mod tests {
         /// The step's loss and gradients, as one graph of the batch and as a graph per example
         /// on a pool of `threads`.
         fn both(batch: &HostBatch, threads: usize) -> ((f32, Vec<f32>), (f32, Vec<f32>)) {
-            let (config, model, device) = (config(), model(), Default::default());
-            let host = HostInputs::assemble(&model, &config, batch, 0);
+            both_with(&config(), batch, threads)
+        }
+
+        fn both_with(
+            config: &TrainConfig,
+            batch: &HostBatch,
+            threads: usize,
+        ) -> ((f32, Vec<f32>), (f32, Vec<f32>)) {
+            let (model, device) = (model(), Default::default());
+            let host = HostInputs::assemble(&model, config, batch, 0);
             let inputs = host.upload(&host.examples, &model, &device).unwrap();
             let (loss, gradients) = weighted_gradients(&model, &inputs, 1.0).unwrap();
             let pool = rayon::ThreadPoolBuilder::new()
@@ -531,6 +584,49 @@ mod tests {
                 one.iter()
                     .zip(&two)
                     .all(|(a, b)| a.to_bits() == b.to_bits())
+            );
+        }
+
+        #[test]
+        fn obstacle_weights_weigh_the_batch_and_each_graph_alike() {
+            // The obstacles moved up into the liquid, so that some liquid is within R of them.
+            let near = |liquid, obstacles, seed| {
+                let mut e = example(liquid, obstacles, seed);
+                for frame in e.frames.chunks_exact_mut(e.particles * 2) {
+                    for p in frame[liquid * 2..].chunks_exact_mut(2) {
+                        p[1] += 0.4;
+                    }
+                }
+                e
+            };
+            let batch = HostBatch {
+                step: 3,
+                examples: vec![near(40, 12, 1), near(25, 20, 3)],
+            };
+            let mut weighted = config();
+            weighted.training.obstacle_weight = Some(4.0);
+            let model = model();
+            let host = HostInputs::assemble(&model, &weighted, &batch, 0);
+            let weights: Vec<f32> = host
+                .examples
+                .iter()
+                .flat_map(|e| host.loss_weights(e, &model))
+                .collect();
+            let count = |w: f32| weights.iter().filter(|&&v| v == w).count();
+            assert_eq!(count(0.0), 32, "the obstacles count for nothing");
+            assert!(count(4.0) > 0 && count(1.0) > 0, "{weights:?}");
+            assert_eq!(count(4.0) + count(1.0), 65);
+            let ((loss, gradients), (split, one)) = both_with(&weighted, &batch, 2);
+            assert!(
+                ((split - loss) / loss).abs() < 1e-6,
+                "loss {split} against the batch's {loss}"
+            );
+            let difference = relative_difference(&one, &gradients);
+            assert!(difference < 1e-5, "gradients differ by {difference:e}");
+            let ((plain, _), _) = both_with(&config(), &batch, 1);
+            assert!(
+                ((plain - loss) / loss).abs() > 1e-4,
+                "the weights change the loss: {plain} and {loss}"
             );
         }
 

@@ -3,9 +3,12 @@
 //! against the closed form.
 
 use phi_core::{AutodiffBackend, Tensor};
+use phi_gns::data::LIQUID;
 use phi_gns::data::OBSTACLE;
 use phi_gns::model::{Gns, GnsKernels, GraphBatch};
-use phi_gns::train::{ErrorNorm, non_kinematic_mask, one_step_loss, random_walk_noise};
+use phi_gns::train::{
+    ErrorNorm, non_kinematic_mask, obstacle_weights, one_step_loss, random_walk_noise,
+};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 
@@ -14,7 +17,8 @@ use super::common::{Rng, config, liquid_over_obstacles, perturbed, spec};
 phi_core::backend_tests!(
     loss_is_the_masked_mean_of_squared_errors,
     huber_loss_is_quadratic_inside_delta_and_linear_outside,
-    relative_loss_divides_each_error_by_its_target_size
+    relative_loss_divides_each_error_by_its_target_size,
+    a_weighted_mask_makes_the_loss_the_weighted_mean
 );
 mod gradient {
     use super::{
@@ -293,6 +297,73 @@ fn huber_loss_is_quadratic_inside_delta_and_linear_outside<B: GnsKernels>() {
     };
     let same = s.loss(wide);
     assert!((same - squared).abs() <= 1e-6 * squared, "{}", B::name());
+}
+
+fn a_weighted_mask_makes_the_loss_the_weighted_mean<B: GnsKernels>() {
+    let s = scored::<B>();
+    let device = B::default_device();
+    let n = s.p.types.len();
+    // Weights 1, 2, 3 in turn for the counted particles, 0 for the obstacles.
+    let weights: Vec<f32> = (0..n)
+        .map(|i| {
+            if s.p.types[i] == OBSTACLE {
+                0.0
+            } else {
+                (1 + i % 3) as f32
+            }
+        })
+        .collect();
+    let mask = Tensor::<B>::from_vec(weights.clone(), &[n], &device).unwrap();
+    let got = f64::from(
+        one_step_loss(&s.p.model, &s.p.batch, &s.next, &mask, ErrorNorm::Squared)
+            .unwrap()
+            .to_scalar()
+            .unwrap(),
+    );
+    let (mut sum, mut total) = (0.0f64, 0.0f64);
+    for &i in &s.counted {
+        let w = f64::from(weights[i]);
+        for k in 0..2 {
+            let d = f64::from(s.predicted[i * 2 + k]) - f64::from(s.target[i * 2 + k]);
+            sum += w * d * d;
+        }
+        total += w;
+    }
+    let expected = sum / total;
+    assert!(
+        (got - expected).abs() <= 1e-5 * expected,
+        "{}: weighted loss {got}, host {expected}",
+        B::name()
+    );
+    assert!(
+        (got - s.loss(ErrorNorm::Squared)).abs() > 1e-4 * expected,
+        "{}: the weights change the mean",
+        B::name()
+    );
+}
+
+#[test]
+fn obstacle_weights_pick_the_counted_particles_within_the_radius_of_an_obstacle() {
+    // Along x: an obstacle at 0.5, liquid at 0.5 ± 0.029 (within R = 0.03), at 0.5 + 0.031
+    // (beyond), and a second obstacle at 0.7 with liquid 0.02 above it (2D distance).
+    let latest = [
+        0.5, 0.2, // obstacle
+        0.471, 0.2, // liquid, 0.029 away
+        0.529, 0.2, // liquid, 0.029 away
+        0.531, 0.2, // liquid, 0.031 away
+        0.7, 0.2, // obstacle
+        0.7, 0.22, // liquid, 0.02 away
+        0.9, 0.9, // liquid, far from both
+    ];
+    let types = [OBSTACLE, LIQUID, LIQUID, LIQUID, OBSTACLE, LIQUID, LIQUID];
+    let weights = obstacle_weights(&latest, 2, &types, &[OBSTACLE], 0.03, 4.0);
+    assert_eq!(weights, vec![0.0, 4.0, 4.0, 1.0, 0.0, 4.0, 1.0]);
+    // Weight 1 is the plain mask of the counted particles.
+    let plain = obstacle_weights(&latest, 2, &types, &[OBSTACLE], 0.03, 1.0);
+    assert_eq!(plain, vec![0.0, 1.0, 1.0, 1.0, 0.0, 1.0, 1.0]);
+    // No kinematic type: nothing is near an obstacle and every particle counts once.
+    let none = obstacle_weights(&latest, 2, &types, &[], 0.03, 4.0);
+    assert_eq!(none, vec![1.0; 7]);
 }
 
 /// The host's relative loss: `Σ_i s² |r_i|² / (|t_i|² + s²)` over the counted particles,
