@@ -17,8 +17,8 @@ use super::config::TrainConfig;
 use super::rng::{RngStream, step_rng};
 use super::stream::HostBatch;
 use super::{
-    Adam, ErrorNorm, multi_step_loss, non_kinematic_mask, obstacle_weights, one_step_loss,
-    pushforward_loss, random_walk_noise,
+    Adam, ErrorNorm, multi_step_loss, obstacle_weights, one_step_loss, pushforward_loss,
+    random_walk_noise,
 };
 use crate::model::{Gns, GnsKernels, GraphBatch, ModelError};
 
@@ -332,8 +332,8 @@ impl<'a> HostInputs<'a> {
             .map(|e| (e.window.as_slice(), e.types))
             .collect();
         let batch = GraphBatch::from_host_batch(&graphs, spec, device)?;
-        let types: Vec<i64> = examples.iter().flat_map(|e| e.types).copied().collect();
-        let (particles, dim, frames) = (types.len(), spec.config.dim, self.truth_frames);
+        let particles: usize = examples.iter().map(|e| e.types.len()).sum();
+        let (dim, frames) = (spec.config.dim, self.truth_frames);
         let next = examples.iter().flat_map(|e| &e.next).copied().collect();
         let next = Tensor::from_vec(next, &[particles, dim], device)?;
         let truth = (frames > 0)
@@ -342,16 +342,11 @@ impl<'a> HostInputs<'a> {
                 Tensor::from_vec(truth, &[particles, frames, dim], device)
             })
             .transpose()?;
-        let mask = match self.obstacle_weight {
-            None => non_kinematic_mask::<B>(&types, &spec.kinematic_types, device)?,
-            Some(_) => {
-                let weights = examples
-                    .iter()
-                    .flat_map(|e| self.loss_weights(e, model))
-                    .collect();
-                Tensor::from_vec(weights, &[particles], device)?
-            }
-        };
+        let weights = examples
+            .iter()
+            .flat_map(|e| self.loss_weights(e, model))
+            .collect();
+        let mask = Tensor::from_vec(weights, &[particles], device)?;
         Ok(StepInputs {
             batch,
             next,
