@@ -20,13 +20,14 @@ Needs numpy (`benches/anchors/gns/requirements.txt` pins it).
 """
 
 import argparse
-import json
 import os
 import sys
 
 import numpy as np
 
-from late_kinetic_energy import liquid_type  # the scripts folder is on the path when run
+# The scripts folder is on the path when one of its scripts runs.
+from dataset_files import read_metadata, read_trajectory
+from late_kinetic_energy import liquid_type
 
 
 def main():
@@ -38,25 +39,18 @@ def main():
     parser.add_argument("--gravity", type=float, default=9.81, help="cells per second² (9.81)")
     args = parser.parse_args()
 
-    meta_path = os.path.join(args.data, "metadata.json")
+    meta, meta_path = read_metadata(args.data)
     try:
-        with open(meta_path) as f:
-            meta = json.load(f)
         radius = float(meta["default_connectivity_radius"])
         gravity = args.gravity * float(meta["dt"]) ** 2 * float(meta["position_scale"])
-    except (OSError, KeyError, TypeError, ValueError, json.JSONDecodeError) as e:
+    except (KeyError, TypeError, ValueError) as e:
         sys.exit(f"error: {meta_path}: cannot read the radius, dt or position_scale ({e})")
     if gravity <= 0.0:
         sys.exit(f"error: --gravity {args.gravity}: gravity must be > 0 to scale by")
     liquid = liquid_type(meta)
     obstacle = [int(k) for k, v in meta.get("particle_types", {}).items() if v == "obstacle"]
     name = f"{args.split}_{args.trajectory}"
-    path = os.path.join(args.data, args.split, f"traj_{args.trajectory:05d}.npz")
-    try:
-        with np.load(path) as d:
-            truth, types = d["position"].astype(np.float64), d["particle_type"]
-    except (OSError, KeyError, ValueError) as e:
-        sys.exit(f"error: {path}: cannot read position and particle_type ({e})")
+    truth, types, path = read_trajectory(args.data, args.split, args.trajectory)
     obstacles = truth[0, np.isin(types, obstacle)]
     if len(obstacles) == 0:
         sys.exit(f"error: {path}: the trajectory has no obstacle particles")

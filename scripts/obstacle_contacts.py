@@ -15,13 +15,13 @@ Needs numpy (`benches/anchors/gns/requirements.txt` pins it).
 """
 
 import argparse
-import json
-import os
 import sys
 
 import numpy as np
 
-from late_kinetic_energy import liquid_type  # the scripts folder is on the path when run
+# The scripts folder is on the path when one of its scripts runs.
+from dataset_files import read_metadata, read_trajectory
+from late_kinetic_energy import liquid_type
 
 
 def obstacle_reach(obstacles, radius, step, cells):
@@ -45,16 +45,14 @@ def main():
     parser.add_argument("--big", type=float, default=4.7, help="a large event, in acc_std")
     args = parser.parse_args()
 
-    meta_path = os.path.join(args.data, "metadata.json")
+    meta, meta_path = read_metadata(args.data)
     try:
-        with open(meta_path) as f:
-            meta = json.load(f)
         radius = float(meta["default_connectivity_radius"])
         lower = np.array([b[0] for b in meta["bounds"]], float)
         upper = np.array([b[1] for b in meta["bounds"]], float)
         acc_mean, acc_std = np.array(meta["acc_mean"], float), np.array(meta["acc_std"], float)
         count = int(meta["splits"][args.split])
-    except (OSError, KeyError, TypeError, ValueError, json.JSONDecodeError) as e:
+    except (KeyError, TypeError, ValueError) as e:
         sys.exit(f"error: {meta_path}: cannot read the radius, bounds, statistics or split ({e})")
     if len(lower) != 2:
         sys.exit(f"error: {meta_path}: bounds of {len(lower)} dimensions; this script reads 2D data")
@@ -68,12 +66,7 @@ def main():
     energy = dict.fromkeys(["all", "obs", "wall"], 0.0)
     with_obstacles = 0
     for i in range(n):
-        path = os.path.join(args.data, args.split, f"traj_{i:05d}.npz")
-        try:
-            with np.load(path) as d:
-                position, types = d["position"].astype(np.float64), d["particle_type"]
-        except (OSError, KeyError, ValueError) as e:
-            sys.exit(f"error: {path}: cannot read position and particle_type ({e})")
+        position, types, _ = read_trajectory(args.data, args.split, i)
         obstacles = position[0, np.isin(types, obstacle)]
         reach = obstacle_reach(obstacles, radius, step, cells)
         with_obstacles += len(obstacles) > 0
