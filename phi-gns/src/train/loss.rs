@@ -39,7 +39,13 @@ pub fn non_kinematic_mask<B: phi_core::Backend>(
     kinematic_types: &[i64],
     device: &B::Device,
 ) -> Result<Tensor<B>, ModelError> {
-    let mask = particle_type
+    let mask = non_kinematic_weights(particle_type, kinematic_types);
+    Ok(Tensor::from_vec(mask, &[particle_type.len()], device)?)
+}
+
+/// [`non_kinematic_mask`]'s values on the host.
+pub(crate) fn non_kinematic_weights(particle_type: &[i64], kinematic_types: &[i64]) -> Vec<f32> {
+    particle_type
         .iter()
         .map(|t| {
             if kinematic_types.contains(t) {
@@ -48,8 +54,7 @@ pub fn non_kinematic_mask<B: phi_core::Backend>(
                 1.0
             }
         })
-        .collect();
-    Ok(Tensor::from_vec(mask, &[particle_type.len()], device)?)
+        .collect()
 }
 
 /// The loss weights of one graph, `[N]`: 0 for kinematic particles, `weight` for a counted

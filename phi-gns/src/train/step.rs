@@ -14,6 +14,7 @@ use phi_core::tensor::Tensor;
 use rayon::prelude::*;
 
 use super::config::TrainConfig;
+use super::loss::non_kinematic_weights;
 use super::rng::{RngStream, step_rng};
 use super::stream::HostBatch;
 use super::{
@@ -292,11 +293,7 @@ impl<'a> HostInputs<'a> {
         let spec = model.spec();
         let kinematic = &spec.kinematic_types;
         let Some(weight) = self.obstacle_weight else {
-            return example
-                .types
-                .iter()
-                .map(|t| if kinematic.contains(t) { 0.0 } else { 1.0 })
-                .collect();
+            return non_kinematic_weights(example.types, kinematic);
         };
         // The latest input frame: the last of each particle's C + 1 window frames.
         let (frames, dim) = (spec.config.input_velocities + 1, spec.config.dim);
