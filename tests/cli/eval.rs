@@ -522,6 +522,54 @@ fn the_floors_join_the_table_and_constant_velocity_rolls_out_straight_lines() {
     let again = json(&path);
     assert!(again["evaluation"]["plausibility"].is_object(), "{again}");
     assert!(again["options"]["container"].is_object(), "{again}");
+
+    // The peak share inside obstacles is the largest count of the curve over the liquid; an
+    // entry written before it is filled in from its curves (here with three particles inside
+    // obstacles in one frame).
+    let peak = |entry: &serde_json::Value| {
+        entry["evaluation"]["curves"]["inside_obstacles"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(f64_of)
+            .fold(0.0, f64::max)
+            / liquid.len() as f64
+    };
+    assert_eq!(f64_of(&plausibility["peak_inside_obstacles"]), peak(&entry));
+    let path = out.join("cache/constant-velocity/test_0.json");
+    let mut old = json(&path);
+    old["evaluation"]["curves"]["inside_obstacles"][4] = 3.into();
+    let fields = old["evaluation"]["plausibility"].as_object_mut().unwrap();
+    fields.remove("peak_inside_obstacles").unwrap();
+    fields.remove("peak_inside_obstacles_true").unwrap();
+    std::fs::write(&path, serde_json::to_vec(&old).unwrap()).unwrap();
+    ok(eval(
+        &[model.display().to_string()],
+        &data,
+        &out,
+        &[
+            "--floors",
+            "--short-rollout",
+            "5",
+            "--sinkhorn-every",
+            "0",
+            "--force",
+        ],
+    ));
+    let csv = std::fs::read_to_string(out.join("table.csv")).unwrap();
+    let column = csv
+        .lines()
+        .next()
+        .unwrap()
+        .split(',')
+        .position(|c| c == "peak_inside_obstacles")
+        .unwrap();
+    let row = csv
+        .lines()
+        .find(|l| l.starts_with("constant-velocity,"))
+        .unwrap();
+    let value: f64 = row.split(',').nth(column).unwrap().parse().unwrap();
+    approx::assert_relative_eq!(value, 3.0 / liquid.len() as f64, max_relative = 1e-12);
 }
 
 #[test]

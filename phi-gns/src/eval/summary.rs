@@ -45,6 +45,11 @@ pub struct PlausibilitySummary {
     pub misplaced: f64,
     /// The same fraction of the ground truth's (liquid in partly covered obstacle cells).
     pub misplaced_true: f64,
+    /// The mean over the trajectories of the largest share of the liquid inside obstacle
+    /// cells in one frame ([`Plausibility::peak_inside_obstacles`]).
+    pub peak_inside_obstacles: f64,
+    /// The same of the ground truth's.
+    pub peak_inside_obstacles_true: f64,
     /// The mean final density ratio.
     pub final_density_ratio: f64,
     /// The mean late kinetic-energy ratio.
@@ -116,6 +121,8 @@ impl PlausibilitySummary {
         Some(PlausibilitySummary {
             misplaced: mean(|p| p.outside + p.inside_obstacles),
             misplaced_true: mean(|p| p.inside_obstacles_true),
+            peak_inside_obstacles: mean(|p| p.peak_inside_obstacles),
+            peak_inside_obstacles_true: mean(|p| p.peak_inside_obstacles_true),
             final_density_ratio: mean(|p| p.final_density_ratio),
             late_kinetic_energy_ratio: mean(|p| p.late_kinetic_energy_ratio),
             final_centre_distance_cells: mean(|p| p.final_centre_distance_cells),

@@ -104,6 +104,20 @@ pub struct Curves {
     pub density_true: Vec<f64>,
 }
 
+impl Curves {
+    /// The largest share of the `liquid_particles` inside an obstacle cell in any one frame,
+    /// of the prediction and of the truth (zeros without the plausibility curves).
+    pub fn peak_inside_obstacles(&self, liquid_particles: usize) -> (f64, f64) {
+        let peak = |counts: &[usize]| {
+            counts.iter().copied().max().unwrap_or(0) as f64 / liquid_particles.max(1) as f64
+        };
+        (
+            peak(&self.inside_obstacles),
+            peak(&self.inside_obstacles_true),
+        )
+    }
+}
+
 /// What a physicist checks of a rollout first, each against the ground truth's.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Plausibility {
@@ -113,6 +127,17 @@ pub struct Plausibility {
     pub inside_obstacles: f64,
     /// The same fraction of the ground truth's.
     pub inside_obstacles_true: f64,
+    /// The largest share of the liquid inside obstacle cells in any one frame
+    /// ([`Curves::peak_inside_obstacles`]): a block that passes through a thin obstacle in a few
+    /// frames is inside it for a small fraction of the particle-frames, and for a large share of
+    /// the liquid in those frames. Not part of [`Plausibility::is_plausible`], whose bounds are
+    /// the particle-frame fractions. A cache entry written before it was recorded is filled in
+    /// from its curves when read.
+    #[serde(default)]
+    pub peak_inside_obstacles: f64,
+    /// The same of the ground truth's.
+    #[serde(default)]
+    pub peak_inside_obstacles_true: f64,
     /// Mean neighbour count of the prediction over the truth's at the last frame.
     pub final_density_ratio: f64,
     /// Kinetic energy of the prediction over the truth's, summed over the last
@@ -461,6 +486,8 @@ fn plausibility(
     let late = frames.saturating_sub(LATE_FRAMES);
     let sum = |v: &[f64]| v[late..].iter().sum::<f64>();
     let last = |v: &[f64]| v.last().copied().unwrap_or(0.0);
+    let (peak_inside_obstacles, peak_inside_obstacles_true) =
+        curves.peak_inside_obstacles(liquid_particles);
     let distance = predicted_centre
         .iter()
         .zip(true_centre)
@@ -472,6 +499,8 @@ fn plausibility(
         inside_obstacles: curves.inside_obstacles.iter().sum::<usize>() as f64 / particle_frames,
         inside_obstacles_true: curves.inside_obstacles_true.iter().sum::<usize>() as f64
             / particle_frames,
+        peak_inside_obstacles,
+        peak_inside_obstacles_true,
         final_density_ratio: last(&curves.density_predicted) / last(&curves.density_true),
         late_kinetic_energy_ratio: sum(&curves.kinetic_energy_predicted)
             / sum(&curves.kinetic_energy_true),

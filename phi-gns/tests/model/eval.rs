@@ -225,6 +225,8 @@ fn a_trajectory_evaluation_agrees_with_independent_rollouts() {
         misplaced as f64 / (8 * steps) as f64,
         max_relative = 1e-12
     );
+    let most_inside = eval.curves.inside_obstacles.iter().max().copied().unwrap();
+    assert_eq!(p.peak_inside_obstacles, most_inside as f64 / 8.0);
     approx::assert_relative_eq!(
         p.final_density_ratio,
         eval.curves.density_predicted[steps - 1] / eval.curves.density_true[steps - 1],
@@ -368,6 +370,8 @@ fn plausibility_needs_every_figure_within_its_bounds() {
         outside: 0.004,
         inside_obstacles: 0.005,
         inside_obstacles_true: 0.003,
+        peak_inside_obstacles: 0.02,
+        peak_inside_obstacles_true: 0.01,
         final_density_ratio: 1.1,
         late_kinetic_energy_ratio: 1.8,
         final_centre_distance_cells: 1.5,
@@ -402,6 +406,51 @@ fn plausibility_needs_every_figure_within_its_bounds() {
     for p in fails {
         assert!(!p.is_plausible(), "{p:?}");
     }
+    // The peak share inside obstacles is reported beside the bounds, not one of them.
+    let passing = Plausibility {
+        peak_inside_obstacles: 0.9,
+        ..good
+    };
+    assert!(passing.is_plausible());
+}
+
+/// A row of four liquid particles falling one cell a frame through a thin obstacle (one row of
+/// obstacle cells) is inside it in one frame of many: a small fraction of the particle-frames,
+/// and all of the liquid in that frame. Stopped on the obstacle's top face, it is never inside.
+#[test]
+fn a_block_passing_through_a_thin_obstacle_peaks_at_all_of_the_liquid() {
+    use phi_gns::eval::compare_trajectories;
+    let cell = 0.025f32;
+    let centre = |i: usize, j: f32| [0.1 + cell * (i as f32 + 0.5), 0.1 + cell * (j + 0.5)];
+    let frames = 20;
+    // Cells (10..16, 10) hold the obstacle; the liquid falls in columns 11..15 from row 19.
+    let scene = |stop: Option<f32>| {
+        let mut position = Vec::new();
+        for t in 0..frames {
+            for i in 10..16 {
+                position.extend(centre(i, 10.0));
+            }
+            let row = (19.0 - t as f32).max(stop.unwrap_or(f32::MIN));
+            for i in 11..15 {
+                position.extend(centre(i, row));
+            }
+        }
+        let types = [vec![OBSTACLE; 6], vec![LIQUID; 4]].concat();
+        Trajectory::new(2, position, types, 0, 0).unwrap()
+    };
+    let (through, stopped) = (scene(None), scene(Some(11.0)));
+    let comparison =
+        compare_trajectories(&through, &stopped, C, &[OBSTACLE], &comparison_options()).unwrap();
+    let p = comparison.plausibility.unwrap();
+    let steps = frames - 1 - C;
+    // Frame 9 puts the liquid in row 10, the obstacle's.
+    assert_eq!(p.inside_obstacles, 1.0 / steps as f64);
+    assert_eq!(p.peak_inside_obstacles, 1.0);
+    assert_eq!(
+        (p.inside_obstacles_true, p.peak_inside_obstacles_true),
+        (0.0, 0.0)
+    );
+    assert_eq!(p.outside, 0.0);
 }
 
 /// `trajectory`'s liquid moved by `shift` in every frame (its obstacle particles stay).

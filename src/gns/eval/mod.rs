@@ -1221,7 +1221,7 @@ fn read_cache(
         );
         (stale, "the same options")
     } else {
-        return Ok(Some(entry));
+        return Ok(Some(fill_peaks(entry)));
     };
     if replace {
         tracing::info!("{}: recomputed (--force): {stale}", path.display());
@@ -1231,6 +1231,18 @@ fn read_cache(
         "{}: {stale}: use another --out, {hint}, or --force to recompute it",
         path.display()
     )
+}
+
+/// `entry` with its peak shares inside obstacles taken from its curves, which a cache entry
+/// written before those figures holds too.
+fn fill_peaks(mut entry: CacheEntry) -> CacheEntry {
+    let evaluation = &mut entry.evaluation;
+    if let Some(p) = &mut evaluation.plausibility {
+        (p.peak_inside_obstacles, p.peak_inside_obstacles_true) = evaluation
+            .curves
+            .peak_inside_obstacles(evaluation.liquid_particles);
+    }
+    entry
 }
 
 /// Writes `value` as pretty JSON, atomically.
@@ -1260,7 +1272,7 @@ type Column = (
     fn(&ModelSummary) -> Option<f64>,
 );
 
-const COLUMNS: [Column; 11] = [
+const COLUMNS: [Column; 12] = [
     ("EMD (10⁻²)", 1e-2, "emd", |s| s.emd),
     ("MSE-acc 1 (10⁻¹)", 1e-1, "mse_acc1", |s| {
         Some(s.mse_acc1)
@@ -1275,6 +1287,12 @@ const COLUMNS: [Column; 11] = [
     ("misplaced (%)", 1e-2, "misplaced", |s| {
         s.plausibility.as_ref().map(|p| p.misplaced)
     }),
+    (
+        "peak in obstacles (%)",
+        1e-2,
+        "peak_inside_obstacles",
+        |s| s.plausibility.as_ref().map(|p| p.peak_inside_obstacles),
+    ),
     ("final density", 1.0, "final_density_ratio", |s| {
         s.plausibility.as_ref().map(|p| p.final_density_ratio)
     }),
