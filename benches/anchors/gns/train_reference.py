@@ -315,6 +315,7 @@ def refuse_unimplemented(config, path):
         ("training.mirror", bool(training.get("mirror", False))),
         ("training.pushforward", "pushforward" in training),
         ("training.obstacle_weight", training.get("obstacle_weight", 1.0) != 1.0),
+        ("training.impact_sampling", "impact_sampling" in training),
     ]
     for key, asked in unimplemented:
         if asked:

@@ -18,7 +18,9 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::{AdamConfig, BatchConfig, ErrorNorm, Pushforward, TrainError, WindowSpec};
+use super::{
+    AdamConfig, BatchConfig, ErrorNorm, ImpactSampling, Pushforward, TrainError, WindowSpec,
+};
 use crate::data::{Metadata, Variant};
 use crate::model::{GnsConfig, ModelSpec, Walls};
 
@@ -115,6 +117,11 @@ pub struct TrainingSection {
     /// contacts are ~3 % of the training data's liquid particle-frames (absent: 1, no weighting).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub obstacle_weight: Option<f64>,
+    /// Draws the fraction `share` of the windows in proportion to their obstacle impacts, the
+    /// rest uniformly (`[training.impact_sampling]`; absent: every draw uniform). See
+    /// `train::impacts`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub impact_sampling: Option<ImpactSampling>,
     /// Mirror augmentation: each example of a batch is reflected across the vertical mid-plane
     /// of the model's bounds (`x ↦ lower + upper − x` on the first axis; gravity is along
     /// the last) with probability ½, which maps a scene to a scene (default off).
@@ -365,6 +372,9 @@ impl TrainConfig {
             && !(w.is_finite() && w > 0.0)
         {
             return fail("training.obstacle_weight", format!("{w} is not > 0"));
+        }
+        if let Some(Err((key, reason))) = t.impact_sampling.as_ref().map(ImpactSampling::check) {
+            return fail(key, reason);
         }
         if let Some(d) = t.ema_decay
             && !(d > 0.0 && d < 1.0)
@@ -628,6 +638,34 @@ mod tests {
         assert!(
             e.contains("training.relative_scale") && e.contains("is not > 0"),
             "{e}"
+        );
+    }
+
+    #[test]
+    fn impact_sampling_is_absent_unless_asked_and_checked() {
+        let text = preset();
+        let plain = TrainConfig::from_toml(&text, "preset.toml").unwrap();
+        assert_eq!(plain.training.impact_sampling, None);
+        assert!(!plain.to_toml().contains("impact_sampling"));
+        let asked = format!("{text}\n[training.impact_sampling]\nshare = 0.5\n");
+        let c = TrainConfig::from_toml(&asked, "preset.toml").unwrap();
+        assert_eq!(
+            c.training.impact_sampling,
+            Some(ImpactSampling {
+                share: 0.5,
+                threshold: 3.0
+            })
+        );
+        assert_eq!(TrainConfig::from_toml(&c.to_toml(), "stored").unwrap(), c);
+        let e = refusal(&asked.replace("share = 0.5", "share = 1.5"));
+        assert!(
+            e.contains("training.impact_sampling.share") && e.contains("not in (0, 1]"),
+            "{e}"
+        );
+        let e = refusal(&asked.replace("share = 0.5", "share = 0.5\nthreshold = -1.0"));
+        assert!(e.contains("training.impact_sampling.threshold"), "{e}");
+        assert!(
+            TrainConfig::from_toml(&asked.replace("share = 0.5", "shares = 0.5"), "p").is_err()
         );
     }
 

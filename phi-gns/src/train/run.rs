@@ -41,6 +41,7 @@ use super::checkpoint::{
     load_checkpoint, prune_checkpoints, save_best, save_checkpoint,
 };
 use super::config::{SelectBy, TrainConfig};
+use super::impacts::ImpactCriterion;
 use super::screening::{Screening, ScreeningPlan, screen};
 use super::step::take_step;
 use super::stream::{BatchSource, BatchStream};
@@ -199,7 +200,27 @@ impl<B: AutodiffBackend + GnsKernels> TrainingRun<B> {
                 .map(|decay| WeightAverage::new(decay, model.params()));
             (model, adam, state, average)
         };
-        let source = BatchSource::new(&dataset, &config.data.split, &config.batches())?;
+        let mut source = BatchSource::new(&dataset, &config.data.split, &config.batches())?;
+        if let Some(sampling) = config.training.impact_sampling {
+            let spec = model.spec();
+            let criterion = ImpactCriterion {
+                kinematic_types: spec.kinematic_types.clone(),
+                radius: spec.config.connectivity_radius,
+                acc_mean: dataset.metadata().acc_mean.clone(),
+                acc_std: dataset.metadata().acc_std.clone(),
+                threshold: sampling.threshold,
+            };
+            let started = Instant::now();
+            let (with, windows, impacts) = source.with_impacts(&criterion, sampling.share)?;
+            source = with;
+            tracing::info!(
+                windows,
+                impacts,
+                seconds = started.elapsed().as_secs_f64(),
+                "impact sampling: {:.0} % of the draws from the windows with obstacle impacts",
+                100.0 * sampling.share
+            );
+        }
         let stream = BatchStream::new(source, state.step, config.data.read_ahead)?;
         let valid = if config.screening.every > 0 {
             read_split(

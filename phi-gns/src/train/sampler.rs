@@ -15,6 +15,9 @@
 //! [`step_rng`]`(seed, step, `[`RngStream::Sampling`]`)`, so that the windows of step `s` depend
 //! on `(seed, s)` alone and a resumed run sees the batches of an uninterrupted one.
 
+use rand::RngCore;
+
+use super::impacts::ImpactPool;
 use super::rng::{RngStream, step_rng, uniform_index};
 use crate::data::{DataError, Dataset};
 
@@ -85,6 +88,9 @@ pub struct WindowSampler {
     lengths: Vec<usize>,
     /// `ends[i]`: the number of valid windows in trajectories `0..=i`.
     ends: Vec<usize>,
+    /// With `[training.impact_sampling]`: the windows with obstacle impacts and the share of
+    /// the draws taken from them (see `train::impacts`).
+    impacts: Option<(ImpactPool, f64)>,
 }
 
 impl WindowSampler {
@@ -135,6 +141,7 @@ impl WindowSampler {
             spec,
             lengths,
             ends,
+            impacts: None,
         })
     }
 
@@ -199,16 +206,36 @@ impl WindowSampler {
         })
     }
 
+    /// The sampler that takes the fraction `share` (in `(0, 1]`) of its draws from `pool`, in
+    /// proportion to each window's impacts, and the others uniformly (a `pool` without windows
+    /// leaves every draw uniform).
+    pub(crate) fn with_impacts(mut self, pool: ImpactPool, share: f64) -> Self {
+        self.impacts = Some((pool, share));
+        self
+    }
+
     /// The `batch_size` windows of step `step`: independent uniform draws over all valid
-    /// windows, from [`step_rng`]`(seed, step, `[`RngStream::Sampling`]`)` in batch order.
+    /// windows, from [`step_rng`]`(seed, step, `[`RngStream::Sampling`]`)` in batch order. With
+    /// impact sampling each draw first decides, from the same generator, whether it comes from
+    /// the impact pool.
     pub fn sample(&self, seed: u64, step: u64, batch_size: usize) -> Vec<WindowRef> {
         let mut rng = step_rng(seed, step, RngStream::Sampling);
         (0..batch_size)
             .map(|_| {
-                let k = uniform_index(&mut rng, self.windows());
+                let k = self
+                    .impact_draw(&mut rng)
+                    .unwrap_or_else(|| uniform_index(&mut rng, self.windows()));
                 self.window(k)
                     .expect("a uniform index below the window count names a window")
             })
             .collect()
+    }
+
+    /// With impact sampling, a window of the pool for the fraction `share` of the calls (a
+    /// 53-bit uniform below `share`), `None` otherwise; draws nothing without it.
+    fn impact_draw(&self, rng: &mut impl RngCore) -> Option<usize> {
+        let (pool, share) = self.impacts.as_ref()?;
+        let u = (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
+        if u < *share { pool.draw(rng) } else { None }
     }
 }

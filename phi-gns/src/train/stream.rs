@@ -18,6 +18,7 @@ use std::sync::{Arc, mpsc};
 use std::thread::JoinHandle;
 
 use super::cache::TrajectoryCache;
+use super::impacts::{ImpactCriterion, ImpactPool};
 use super::sampler::{WindowRef, WindowSampler, WindowSpec};
 use crate::data::{DataError, Dataset, IoError};
 
@@ -122,6 +123,23 @@ impl BatchSource {
             seed: config.seed,
             batch_size: config.batch_size,
         })
+    }
+
+    /// The source that draws the fraction `share` of its windows in proportion to their
+    /// obstacle impacts under `criterion` (see `train::impacts`), after reading every trajectory
+    /// of its split once to count them; returns the pool's windows and impacts too.
+    ///
+    /// # Errors
+    /// A trajectory file that cannot be read (named).
+    pub fn with_impacts(
+        mut self,
+        criterion: &ImpactCriterion,
+        share: f64,
+    ) -> Result<(Self, usize, u64), DataError> {
+        let pool = ImpactPool::scan(self.cache.dataset(), &self.sampler, criterion)?;
+        let (windows, impacts) = (pool.windows(), pool.impacts());
+        self.sampler = self.sampler.with_impacts(pool, share);
+        Ok((self, windows, impacts))
     }
 
     /// The batch of step `step`.

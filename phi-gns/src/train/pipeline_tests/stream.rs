@@ -213,3 +213,67 @@ fn a_step_waits_less_for_read_ahead_batches_on_the_real_dataset() {
         assert_eq!(pair[0], pair[1], "read-ahead changed the batches");
     }
 }
+
+/// Impact sampling: the pool is each window's count of impacts, and with a share of 1 every
+/// drawn window is one of the pool's.
+#[test]
+fn impact_sampling_draws_from_the_windows_with_impacts() {
+    use crate::data::OBSTACLE;
+    use crate::train::impacts::{ImpactCriterion, ImpactPool};
+    let dir = temp_dir("impacts");
+    // Random positions every frame: large accelerations everywhere, one obstacle particle per
+    // trajectory, so a window has an impact when a liquid particle happens to be near it.
+    let written = write_dataset(&dir, &[12, 9, 15], 14);
+    let dataset = Dataset::open(&dir).unwrap();
+    let meta = dataset.metadata();
+    let criterion = ImpactCriterion {
+        kinematic_types: vec![OBSTACLE],
+        radius: 0.2,
+        acc_mean: meta.acc_mean.clone(),
+        acc_std: meta.acc_std.clone(),
+        threshold: 1.0,
+    };
+    let source = BatchSource::new(&dataset, "train", &config(1 << 20)).unwrap();
+    let sampler = source.sampler();
+    let counts: Vec<(usize, u32)> = (0..sampler.windows())
+        .map(|k| {
+            let w = sampler.window(k).unwrap();
+            let traj = &written[w.trajectory];
+            let count = criterion.count(
+                traj.frame(w.frame - 1),
+                traj.frame(w.frame),
+                traj.frame(w.frame + 1),
+                &traj.particle_type,
+                2,
+            );
+            (k, count)
+        })
+        .collect();
+    let with = counts.iter().filter(|(_, c)| *c > 0).count();
+    assert!(
+        with > 0 && with < counts.len(),
+        "{with} of {}",
+        counts.len()
+    );
+    let pool = ImpactPool::scan(&dataset, sampler, &criterion).unwrap();
+    assert_eq!(pool, ImpactPool::new(counts.iter().copied()));
+
+    let (source, windows, impacts) = source.with_impacts(&criterion, 1.0).unwrap();
+    assert_eq!(windows, with);
+    assert_eq!(
+        impacts,
+        counts.iter().map(|(_, c)| u64::from(*c)).sum::<u64>()
+    );
+    let sampler = source.sampler();
+    let index = |w: crate::train::sampler::WindowRef| {
+        (0..sampler.windows())
+            .find(|&k| sampler.window(k) == Some(w))
+            .unwrap()
+    };
+    for step in 0..50 {
+        for w in sampler.sample(21, step, 3) {
+            assert!(counts[index(w)].1 > 0, "step {step}: {w:?} has no impact");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
