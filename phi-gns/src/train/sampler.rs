@@ -1,5 +1,6 @@
 //! Which windows a training step sees: a deterministic sampler, uniform over every valid
-//! `(trajectory, frame)` pair of a split.
+//! `(trajectory, frame)` pair of a split (with `[training.impact_sampling]`, a share of the
+//! draws goes to the windows with obstacle impacts instead: `train::impacts`).
 //!
 //! A window of latest input frame `t` holds the frames `t − C − span_before ..= t + span_after`
 //! ([`WindowSpec`]): the `C + 1` input positions, `span_before` earlier frames from which
