@@ -18,6 +18,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::loss::obstacle_weights;
 use super::rng::uniform_index;
 use super::sampler::WindowSampler;
 use crate::data::{DataError, Dataset};
@@ -84,41 +85,29 @@ impl ImpactCriterion {
         particle_type: &[i64],
         dim: usize,
     ) -> u32 {
-        let point = |frame: &'_ [f32], i: usize| -> Vec<f64> {
-            frame[i * dim..(i + 1) * dim]
-                .iter()
-                .map(|&v| f64::from(v))
-                .collect()
-        };
-        let kinematic: Vec<Vec<f64>> = (0..particle_type.len())
-            .filter(|&i| self.kinematic_types.contains(&particle_type[i]))
-            .map(|i| point(now, i))
-            .collect();
-        if kinematic.is_empty() {
-            return 0;
-        }
-        let reach = self.radius * self.radius;
+        // Weight 2 marks the counted particles with an obstacle within R ([`obstacle_weights`]).
+        let near = obstacle_weights(
+            now,
+            dim,
+            particle_type,
+            &self.kinematic_types,
+            self.radius as f32,
+            2.0,
+        );
         let mut count = 0;
-        for (i, kind) in particle_type.iter().enumerate() {
-            if self.kinematic_types.contains(kind) {
+        for (i, weight) in near.iter().enumerate() {
+            if *weight != 2.0 {
                 continue;
             }
-            let p = point(now, i);
-            let (b, n) = (point(before, i), point(next, i));
             let size: f64 = (0..dim)
                 .map(|a| {
-                    let acc = n[a] - 2.0 * p[a] + b[a];
+                    let k = i * dim + a;
+                    let acc = f64::from(next[k]) - 2.0 * f64::from(now[k]) + f64::from(before[k]);
                     ((acc - self.acc_mean[a]) / self.acc_std[a]).powi(2)
                 })
                 .sum::<f64>()
                 .sqrt();
-            if size <= self.threshold {
-                continue;
-            }
-            let near = kinematic
-                .iter()
-                .any(|q| p.iter().zip(q).map(|(x, y)| (x - y) * (x - y)).sum::<f64>() <= reach);
-            if near {
+            if size > self.threshold {
                 count += 1;
             }
         }
