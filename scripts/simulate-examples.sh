@@ -3,8 +3,8 @@
 # default ndarray backend. Each run writes out/<scene>/: trajectory.npz, run.json, frames/ and
 # simulation.gif. Extra arguments go to every `phi simulate` call (e.g. --backend burn).
 # Then the learned simulator shipped in experiments/levers/two-step-r040-impacts-4000 (the
-# CPU-scale model of docs/gns.md, "What limits learning", with clamped walls) rolls out test
-# scene 4 of the thesis's dataset next to its FLIP ground truth:
+# CPU-scale model of docs/gns.md, "What limits learning", with clamped walls and liquid pushed
+# out of obstacles) rolls out test scene 4 of the thesis's dataset next to its FLIP ground truth:
 # out/gns-rollout/test_4/rollout.gif.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
