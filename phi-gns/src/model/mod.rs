@@ -35,6 +35,7 @@
 //! # Ok::<(), phi_gns::model::ModelError>(())
 //! ```
 
+pub mod average;
 mod batch;
 pub mod config;
 pub(crate) mod features;
@@ -50,6 +51,7 @@ use phi_core::error::TensorError;
 use phi_core::tensor::Tensor;
 
 use crate::graph::GraphError;
+pub use average::average_models;
 pub use batch::GraphBatch;
 pub use config::{ConfigOverrides, GnsConfig, ModelSpec, Normalisation, Obstacles, Walls};
 use features::Normalisers;
