@@ -45,6 +45,9 @@ pub enum ModelCommand {
     /// One-step predictions for a block of liquid in free fall and a pool at rest, as
     /// fractions of gravity, beside the floors: has training learnt gravity and rest?
     Probe(super::probe::ProbeArgs),
+    /// Write a model directory whose weights are the mean of several models' of one
+    /// configuration (checkpoint averaging over the end of a run).
+    Average(super::average::AverageArgs),
 }
 
 /// `phi model init --data DATASET --out DIR [options]`.
@@ -209,6 +212,7 @@ pub fn init(args: &InitArgs) -> Result<InitSummary> {
 pub fn run(command: ModelCommand) -> Result<()> {
     match command {
         ModelCommand::Probe(args) => super::probe::run(&args),
+        ModelCommand::Average(args) => super::average::run(&args),
         ModelCommand::Init(args) => {
             let summary = init(&args)?;
             let c = &summary.spec.config;

@@ -21,6 +21,7 @@
 //! [`rollout::ROLLOUT_OUTPUTS`], [`eval::EVAL_OUTPUTS`]; the rule is
 //! [`crate::output::target`]'s).
 
+pub mod average;
 pub mod eval;
 pub mod init;
 pub mod inverse;

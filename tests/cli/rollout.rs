@@ -797,3 +797,44 @@ fn clamped_walls_keep_a_sinking_model_in_the_box() {
     assert!(liquid_y(&pushed).iter().all(|&y| y >= 0.1));
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn model_average_writes_the_mean_weights_and_refuses_mismatched_models() {
+    let dir = scratch("model-average");
+    let data = dir.join("data");
+    tiny_dataset(&data, 2, [0.1, 0.9], Variant::Obstacles);
+    let (a, b, out) = (dir.join("a"), dir.join("b"), dir.join("mean"));
+    ok(init(&data, &a, &["--seed", "1"]));
+    ok(init(&data, &b, &["--seed", "2"]));
+    let average = |extra: &[&Path]| {
+        let mut command = phi();
+        command.args(["model", "average", "--out"]).arg(&out);
+        for m in extra {
+            command.arg(m);
+        }
+        command.output().unwrap()
+    };
+    ok(average(&[&a, &b]));
+    let device = Default::default();
+    let [ma, mb, mean] = [&a, &b, &out].map(|d| load_model::<NdArray>(d, &device).unwrap());
+    for (name, t) in mean.params().iter() {
+        let (x, y) = (
+            ma.params().get(name).to_vec(),
+            mb.params().get(name).to_vec(),
+        );
+        for (k, v) in t.to_vec().iter().enumerate() {
+            let expected = ((f64::from(x[k]) + f64::from(y[k])) / 2.0) as f32;
+            assert_eq!(*v, expected, "{name}[{k}]");
+        }
+    }
+    let spec = json(&out.join("model.json"));
+    assert_eq!(spec["provenance"]["made_by"], "phi model average");
+    assert_eq!(spec["config"], json(&a.join("model.json"))["config"]);
+    // Its own output is replaced only with --force; another model's directory never.
+    assert!(failed(average(&[&a, &b])).contains("--force"));
+    let wide = dir.join("wide");
+    ok(init(&data, &wide, &["--hidden-layers", "1"]));
+    let err = failed(average(&[&a, &wide]));
+    assert!(err.contains("config.hidden_layers"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
